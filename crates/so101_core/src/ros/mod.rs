@@ -1,0 +1,14 @@
+//! ROS 2 plumbing shared by every node of the stack.
+
+pub mod clock;
+pub mod context;
+pub mod logging;
+pub mod names;
+pub mod node;
+pub mod qos;
+pub mod rate_limit;
+pub mod shutdown;
+
+pub use context::{create_context, ContextError, RosEnvironment};
+pub use names::{NameError, Names};
+pub use node::{NodeArgs, RosNode};

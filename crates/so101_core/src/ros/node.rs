@@ -1,0 +1,155 @@
+//! A ROS 2 node with the stack's conventions: context from the environment, names under the
+//! namespace, rosout mirroring.
+//!
+//! No ros2-client Spinner runs: it always subscribes /clock as builtin_interfaces/Time, which puts a
+//! second, wrong type on /clock in every peer's graph (rclpy then lists /clock with two types) and
+//! never matches a standard rosgraph_msgs/Clock publisher anyway. The nodes here need none of what
+//! it serves (parameter services, graph events); node discovery comes from the context's
+//! ros_discovery_info, and sim time from [`super::clock::SimClock`].
+
+use ros2_client::{
+    Context, Node, NodeOptions, Publisher, QosProfile, Server, ServiceMapping, Subscription,
+};
+use serde::de::DeserializeOwned;
+use so101_msgs::{RosMessage, RosService};
+
+use super::{
+    context::ContextError, create_context, logging, names::NameError, qos, Names, RosEnvironment,
+};
+
+/// Command-line options every node shares.
+#[derive(Debug, Clone, Default, clap::Args)]
+pub struct NodeArgs {
+    /// Namespace for every topic and service of this node (e.g. `left` gives /left/joint_states),
+    /// so two arms can share one ROS graph.
+    #[arg(long)]
+    pub namespace: Option<String>,
+}
+
+#[derive(Debug, thiserror::Error)]
+pub enum NodeError {
+    #[error(transparent)]
+    Context(#[from] ContextError),
+    #[error(transparent)]
+    Name(#[from] NameError),
+    #[error("cannot create {what}: {reason}")]
+    Create { what: String, reason: String },
+    #[error("{0}")]
+    Other(String),
+}
+
+/// A started node. Dropping it leaves the graph.
+pub struct RosNode {
+    node: Node,
+    names: Names,
+    // Kept so the participant outlives the node.
+    _context: Context,
+}
+
+impl RosNode {
+    /// Creates the node `base_name` in the namespace of `args` .
+    pub fn start(base_name: &str, args: &NodeArgs) -> Result<Self, NodeError> {
+        let environment = RosEnvironment::from_env()?;
+        let names = Names::new(args.namespace.as_deref())?;
+        let context = create_context(&environment)?;
+        let node = context
+            .new_node(
+                names.node_name(base_name)?,
+                NodeOptions::new()
+                    .enable_rosout(true)
+                    .start_parameter_services(false),
+            )
+            .map_err(|error| NodeError::Create {
+                what: format!("node {base_name}"),
+                reason: format!("{error:?}"),
+            })?;
+        logging::attach_rosout(node.logging_handle());
+        tracing::info!(
+            node = %names.resolve(base_name),
+            domain_id = environment.domain_id,
+            localhost_only = environment.localhost_only,
+            "node started"
+        );
+        Ok(Self {
+            node,
+            names,
+            _context: context,
+        })
+    }
+
+    pub fn names(&self) -> &Names {
+        &self.names
+    }
+
+    pub fn node(&self) -> &Node {
+        &self.node
+    }
+
+    /// A publisher of `T` on `relative` (resolved in the namespace).
+    pub fn publisher<T: RosMessage>(
+        &mut self,
+        relative: &str,
+        qos: QosProfile,
+    ) -> Result<Publisher<T>, NodeError> {
+        let topic = self.topic::<T>(relative, &qos)?;
+        self.node
+            .create_publisher(&topic, Some(qos))
+            .map_err(|error| NodeError::Create {
+                what: format!("publisher {relative}"),
+                reason: format!("{error:?}"),
+            })
+    }
+
+    /// A subscription of `T` on `relative` (resolved in the namespace).
+    pub fn subscription<T: RosMessage + DeserializeOwned + 'static>(
+        &mut self,
+        relative: &str,
+        qos: QosProfile,
+    ) -> Result<Subscription<T>, NodeError> {
+        let topic = self.topic::<T>(relative, &qos)?;
+        self.node
+            .create_subscription(&topic, Some(qos))
+            .map_err(|error| NodeError::Create {
+                what: format!("subscription {relative}"),
+                reason: format!("{error:?}"),
+            })
+    }
+
+    /// A server of service `S` on `relative`, with rclpy's service QoS and the mapping rclpy uses.
+    pub fn server<S: RosService>(
+        &mut self,
+        relative: &str,
+    ) -> Result<Server<S::Request, S::Response>, NodeError>
+    where
+        S::Request: Clone + 'static,
+        S::Response: 'static,
+    {
+        let name = self.names.name(relative)?;
+        self.node
+            .create_server::<S::Request, S::Response>(
+                ServiceMapping::Enhanced,
+                &name,
+                &S::service_type_name(),
+                qos::service(),
+                qos::service(),
+            )
+            .map_err(|error| NodeError::Create {
+                what: format!("service {relative}"),
+                reason: format!("{error:?}"),
+            })
+    }
+
+    fn topic<T: RosMessage>(
+        &self,
+        relative: &str,
+        qos: &QosProfile,
+    ) -> Result<ros2_client::dds::rustdds::Topic, NodeError> {
+        let name = self.names.name(relative)?;
+        self.node
+            .create_topic(&name, T::INFO.message_type_name(), qos)
+            .map_err(|error| NodeError::Create {
+                what: format!("topic {relative}"),
+                reason: format!("{error:?}"),
+            })
+    }
+}

@@ -1,0 +1,99 @@
+//! Clean shutdown on SIGINT/SIGTERM: the first signal asks every loop to stop so publishers are
+//! dropped and the DDS participant says goodbye to its peers; a second signal exits at once.
+
+use std::sync::{
+    atomic::{AtomicBool, Ordering},
+    Arc,
+};
+
+use signal_hook::{
+    consts::{SIGINT, SIGTERM},
+    iterator::Signals,
+};
+
+/// A cloneable handle on "has shutdown been requested?".
+#[derive(Clone)]
+pub struct Shutdown {
+    requested: Arc<AtomicBool>,
+    /// Closed (its sender dropped) when shutdown is requested: every waiter wakes at once.
+    closed: smol::channel::Receiver<()>,
+    trigger: Arc<std::sync::Mutex<Option<smol::channel::Sender<()>>>>,
+}
+
+impl Shutdown {
+    /// A handle that only [`Shutdown::request`] triggers (tests, `--duration`).
+    pub fn new() -> Self {
+        let (sender, receiver) = smol::channel::bounded(1);
+        Self {
+            requested: Arc::new(AtomicBool::new(false)),
+            closed: receiver,
+            trigger: Arc::new(std::sync::Mutex::new(Some(sender))),
+        }
+    }
+
+    /// A handle triggered by SIGINT or SIGTERM. A second signal exits the process with status 130.
+    pub fn on_signals() -> std::io::Result<Self> {
+        let shutdown = Self::new();
+        let mut signals = Signals::new([SIGINT, SIGTERM])?;
+        let handle = shutdown.clone();
+        std::thread::Builder::new()
+            .name("signals".into())
+            .spawn(move || {
+                let mut forever = signals.forever();
+                if let Some(signal) = forever.next() {
+                    tracing::info!(signal, "shutdown requested");
+                    handle.request();
+                }
+                if forever.next().is_some() {
+                    tracing::warn!("second signal: exiting without cleanup");
+                    std::process::exit(130);
+                }
+            })?;
+        Ok(shutdown)
+    }
+
+    pub fn request(&self) {
+        self.requested.store(true, Ordering::SeqCst);
+        if let Ok(mut trigger) = self.trigger.lock() {
+            trigger.take();
+        }
+    }
+
+    pub fn is_requested(&self) -> bool {
+        self.requested.load(Ordering::SeqCst)
+    }
+
+    /// Resolves once shutdown is requested.
+    pub async fn wait(&self) {
+        // recv() fails as soon as the channel is closed; no message is ever sent.
+        let _ = self.closed.recv().await;
+    }
+}
+
+impl Default for Shutdown {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn request_wakes_every_waiter() {
+        let shutdown = Shutdown::new();
+        let waiters: Vec<_> = (0..3)
+            .map(|_| {
+                let handle = shutdown.clone();
+                std::thread::spawn(move || smol::block_on(handle.wait()))
+            })
+            .collect();
+        assert!(!shutdown.is_requested());
+        shutdown.request();
+        for waiter in waiters {
+            waiter.join().unwrap();
+        }
+        assert!(shutdown.is_requested());
+    }
+}

@@ -1,0 +1,63 @@
+//! Command-line options of so101_sim_node.
+
+use std::path::PathBuf;
+
+use so101_core::ros::NodeArgs;
+
+use crate::{
+    pacing::{self, TimeMode},
+    task::TaskKind,
+};
+
+/// MuJoCo simulation of the SO-101 arm with a cube-to-bin task, publishing /joint_states and
+/// obeying /joint_commands like the physical arm's driver.
+#[derive(Debug, clap::Parser)]
+#[command(version, about, long_about = None)]
+pub struct Args {
+    /// MJCF scene to load.
+    #[arg(long, default_value = default_scene())]
+    pub scene: PathBuf,
+    /// Mesh-free visual variant: loads without the third-party meshes fetched at set-up.
+    #[arg(long)]
+    pub lite: bool,
+    /// Task that defines /task/reward and /task/success.
+    #[arg(long, value_enum, default_value = "cube_to_bin")]
+    pub task: TaskKind,
+    /// cube_to_bin only: dense shaping for approach, grasp, lift and place instead of a sparse reward.
+    #[arg(long)]
+    pub dense_reward: bool,
+    /// Seed of the cube placement on /sim/reset: the same seed gives the same sequence of episodes.
+    #[arg(long, default_value_t = 0)]
+    pub seed: u64,
+    /// Control rate in Hz: /joint_states, /clock and the task topics are published once per period.
+    #[arg(long, default_value_t = 100.0, value_parser = parse_rate)]
+    pub rate: f64,
+    /// Sim time relative to wall time: a factor (1 = real time, 2 = twice as fast) or "max".
+    #[arg(long, default_value = "1", value_parser = pacing::parse_speed, conflicts_with = "lockstep")]
+    pub speed: TimeMode,
+    /// Advance one control period per /sim/step call and never by itself (deterministic evaluation, RL).
+    #[arg(long)]
+    pub lockstep: bool,
+    /// Play the built-in pick-and-place demo until the first external command arrives.
+    #[arg(long)]
+    pub demo: bool,
+    /// Exit cleanly after this many seconds of wall time.
+    #[arg(long)]
+    pub duration: Option<f64>,
+    #[command(flatten)]
+    pub node: NodeArgs,
+}
+
+pub fn default_scene() -> &'static str {
+    concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/../../assets/so101_cube_to_bin.xml"
+    )
+}
+
+fn parse_rate(text: &str) -> Result<f64, String> {
+    match text.parse::<f64>() {
+        Ok(rate) if rate.is_finite() && rate > 0.0 && rate <= 10_000.0 => Ok(rate),
+        _ => Err(format!("{text:?} is not a rate between 0 and 10000 Hz")),
+    }
+}

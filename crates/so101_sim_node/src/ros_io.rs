@@ -1,0 +1,353 @@
+//! The node's side of the topic contract: the publishers (on their own thread, so publishing never
+//! slows the physics), the command subscriptions with validation, and the two services.
+
+use std::{
+    sync::mpsc::{sync_channel, Receiver, SyncSender},
+    thread::JoinHandle,
+    time::{Duration, Instant},
+};
+
+use ros2_client::{Publisher, Server, Subscription};
+use so101_core::{
+    command::{targets_from_array, targets_from_joint_state, CommandError, PartialTargets},
+    robot::JOINT_NAMES,
+    ros::{node::NodeError, qos, rate_limit::RateLimiter, RosNode},
+};
+use so101_msgs::{
+    builtin_interfaces::Time,
+    diagnostic_msgs::{DiagnosticArray, DiagnosticStatus, KeyValue},
+    geometry_msgs::{Point, Pose, PoseStamped, Quaternion},
+    rosgraph_msgs::Clock,
+    sensor_msgs::JointState,
+    std_msgs::{Bool, Float64, Float64MultiArray, Header},
+    std_srvs::{Trigger, TriggerRequest, TriggerResponse},
+};
+
+use crate::world::{ArmState, CubePose};
+
+/// Everything published for one control period.
+pub struct Frame {
+    pub sim_time: f64,
+    pub arm: ArmState,
+    pub reward: f64,
+    pub success: bool,
+    pub cube: CubePose,
+    pub diagnostics: Option<NodeDiagnostics>,
+    /// Signalled once the frame is on the wire (lockstep answers /sim/step only after that).
+    pub published: Option<SyncSender<()>>,
+}
+
+/// Counters reported on /diagnostics.
+#[derive(Debug, Clone, Default)]
+pub struct NodeDiagnostics {
+    pub accepted_commands: u64,
+    pub rejected_commands: u64,
+    pub episode: u64,
+    pub mujoco_warnings: u64,
+    pub pacing_resyncs: u64,
+}
+
+struct Publishers {
+    joint_states: Publisher<JointState>,
+    clock: Publisher<Clock>,
+    reward: Publisher<Float64>,
+    success: Publisher<Bool>,
+    cube_pose: Publisher<PoseStamped>,
+    diagnostics: Publisher<DiagnosticArray>,
+}
+
+/// Frames queued ahead of the publisher thread before the physics waits for it.
+const FRAME_QUEUE: usize = 256;
+
+/// The publisher thread: frames go in, messages go out.
+pub struct FramePublisher {
+    sender: Option<SyncSender<Frame>>,
+    thread: Option<JoinHandle<()>>,
+}
+
+impl FramePublisher {
+    pub fn start(node: &mut RosNode) -> Result<Self, NodeError> {
+        let topic = qos::default_topic();
+        let publishers = Publishers {
+            joint_states: node.publisher("joint_states", topic.clone())?,
+            clock: node.publisher("clock", topic.clone())?,
+            reward: node.publisher("task/reward", topic.clone())?,
+            success: node.publisher("task/success", topic.clone())?,
+            cube_pose: node.publisher("cube/pose", topic.clone())?,
+            diagnostics: node.publisher("diagnostics", topic)?,
+        };
+        let (sender, receiver) = sync_channel(FRAME_QUEUE);
+        let thread = std::thread::Builder::new()
+            .name("publisher".into())
+            .spawn(move || publish_frames(&publishers, &receiver))
+            .map_err(|error| {
+                NodeError::Other(format!("cannot start the publisher thread: {error}"))
+            })?;
+        Ok(Self {
+            sender: Some(sender),
+            thread: Some(thread),
+        })
+    }
+
+    /// Queues a frame; waits when the publisher thread is a full queue behind (lossless).
+    pub fn send(&self, frame: Frame) {
+        if let Some(sender) = &self.sender {
+            let _ = sender.send(frame);
+        }
+    }
+}
+
+impl Drop for FramePublisher {
+    fn drop(&mut self) {
+        self.sender.take();
+        if let Some(thread) = self.thread.take() {
+            let _ = thread.join();
+        }
+    }
+}
+
+fn publish_frames(publishers: &Publishers, frames: &Receiver<Frame>) {
+    let names: Vec<String> = JOINT_NAMES.iter().map(|name| name.to_string()).collect();
+    let mut failures = RateLimiter::new(Duration::from_secs(5));
+    for frame in frames {
+        let stamp = Time::from_secs_f64(frame.sim_time);
+        let header = |frame_id: &str| Header {
+            stamp,
+            frame_id: frame_id.to_owned(),
+        };
+        let (position, orientation) = (frame.cube.position, frame.cube.orientation);
+        let results = [
+            publishers
+                .joint_states
+                .publish(JointState {
+                    header: header(""),
+                    name: names.clone(),
+                    position: frame.arm.position.to_vec(),
+                    velocity: frame.arm.velocity.to_vec(),
+                    effort: frame.arm.effort.to_vec(),
+                })
+                .is_ok(),
+            publishers.clock.publish(Clock { clock: stamp }).is_ok(),
+            publishers
+                .reward
+                .publish(Float64 { data: frame.reward })
+                .is_ok(),
+            publishers
+                .success
+                .publish(Bool {
+                    data: frame.success,
+                })
+                .is_ok(),
+            publishers
+                .cube_pose
+                .publish(PoseStamped {
+                    header: header("world"),
+                    pose: Pose {
+                        position: Point {
+                            x: position[0],
+                            y: position[1],
+                            z: position[2],
+                        },
+                        orientation: Quaternion {
+                            w: orientation[0],
+                            x: orientation[1],
+                            y: orientation[2],
+                            z: orientation[3],
+                        },
+                    },
+                })
+                .is_ok(),
+            frame.diagnostics.is_none_or(|diagnostics| {
+                publishers
+                    .diagnostics
+                    .publish(diagnostics_message(header(""), &diagnostics))
+                    .is_ok()
+            }),
+        ];
+        if results.contains(&false) {
+            if let Some(suppressed) = failures.check(Instant::now()) {
+                tracing::warn!(suppressed, "publishing failed for part of a frame");
+            }
+        }
+        if let Some(published) = frame.published {
+            let _ = published.send(());
+        }
+    }
+}
+
+fn diagnostics_message(header: Header, diagnostics: &NodeDiagnostics) -> DiagnosticArray {
+    let value = |key: &str, value: u64| KeyValue {
+        key: key.to_owned(),
+        value: value.to_string(),
+    };
+    let (level, message) = if diagnostics.mujoco_warnings > 0 {
+        (
+            DiagnosticStatus::WARN,
+            "MuJoCo reported numerical warnings (see the log)",
+        )
+    } else {
+        (DiagnosticStatus::OK, "running")
+    };
+    DiagnosticArray {
+        header,
+        status: vec![DiagnosticStatus {
+            level,
+            name: "so101_sim_node: commands".to_owned(),
+            message: message.to_owned(),
+            hardware_id: "so101_sim".to_owned(),
+            values: vec![
+                value("accepted_commands", diagnostics.accepted_commands),
+                value("rejected_commands", diagnostics.rejected_commands),
+                value("episode", diagnostics.episode),
+                value("mujoco_warnings", diagnostics.mujoco_warnings),
+                value("pacing_resyncs", diagnostics.pacing_resyncs),
+            ],
+        }],
+    }
+}
+
+/// The command subscriptions and the rules for accepting what arrives on them.
+pub struct CommandInbox {
+    joint_commands: Subscription<JointState>,
+    array_commands: Subscription<Float64MultiArray>,
+    warnings: RateLimiter,
+    pub accepted: u64,
+    pub rejected: u64,
+}
+
+impl CommandInbox {
+    pub fn subscribe(node: &mut RosNode) -> Result<Self, NodeError> {
+        Ok(Self {
+            joint_commands: node.subscription("joint_commands", qos::command_subscription())?,
+            array_commands: node.subscription(
+                "forward_position_controller/commands",
+                qos::command_subscription(),
+            )?,
+            warnings: RateLimiter::new(Duration::from_secs(1)),
+            accepted: 0,
+            rejected: 0,
+        })
+    }
+
+    /// Every valid command that arrived since the last call, oldest first.
+    pub fn drain(&mut self) -> Vec<PartialTargets> {
+        let mut accepted = Vec::new();
+        loop {
+            match self.joint_commands.take() {
+                Ok(Some((message, _))) => {
+                    let result = targets_from_joint_state(&message.name, &message.position);
+                    self.record("/joint_commands", result, &mut accepted);
+                }
+                Ok(None) => break,
+                Err(error) => self.reject(
+                    "/joint_commands",
+                    &format!("undecodable message: {error:?}"),
+                ),
+            }
+        }
+        loop {
+            match self.array_commands.take() {
+                Ok(Some((message, _))) => {
+                    let result = targets_from_array(&message.data);
+                    self.record(
+                        "/forward_position_controller/commands",
+                        result,
+                        &mut accepted,
+                    );
+                }
+                Ok(None) => break,
+                Err(error) => self.reject(
+                    "/forward_position_controller/commands",
+                    &format!("undecodable message: {error:?}"),
+                ),
+            }
+        }
+        accepted
+    }
+
+    fn record(
+        &mut self,
+        topic: &str,
+        result: Result<PartialTargets, CommandError>,
+        accepted: &mut Vec<PartialTargets>,
+    ) {
+        match result {
+            Ok(targets) => {
+                self.accepted += 1;
+                accepted.push(targets);
+            }
+            Err(error) => self.reject(topic, &error.to_string()),
+        }
+    }
+
+    fn reject(&mut self, topic: &str, reason: &str) {
+        self.rejected += 1;
+        if let Some(suppressed) = self.warnings.check(Instant::now()) {
+            tracing::warn!(
+                topic,
+                rejected_total = self.rejected,
+                suppressed,
+                "command rejected: {reason}"
+            );
+        }
+    }
+}
+
+/// /sim/reset and /sim/step.
+pub struct SimServices {
+    reset: Server<TriggerRequest, TriggerResponse>,
+    step: Server<TriggerRequest, TriggerResponse>,
+}
+
+/// A service call waiting for its answer.
+pub struct PendingCall(ros2_client::RmwRequestId);
+
+impl SimServices {
+    pub fn serve(node: &mut RosNode) -> Result<Self, NodeError> {
+        Ok(Self {
+            reset: node.server::<Trigger>("sim/reset")?,
+            step: node.server::<Trigger>("sim/step")?,
+        })
+    }
+
+    pub fn next_reset(&self) -> Option<PendingCall> {
+        take_request(&self.reset, "/sim/reset")
+    }
+
+    pub fn next_step(&self) -> Option<PendingCall> {
+        take_request(&self.step, "/sim/step")
+    }
+
+    pub fn answer_reset(&self, call: PendingCall, success: bool, message: String) {
+        answer(&self.reset, call, success, message);
+    }
+
+    pub fn answer_step(&self, call: PendingCall, success: bool, message: String) {
+        answer(&self.step, call, success, message);
+    }
+}
+
+fn take_request(
+    server: &Server<TriggerRequest, TriggerResponse>,
+    name: &str,
+) -> Option<PendingCall> {
+    match server.receive_request() {
+        Ok(Some((id, _))) => Some(PendingCall(id)),
+        Ok(None) => None,
+        Err(error) => {
+            tracing::warn!(service = name, ?error, "bad service request");
+            None
+        }
+    }
+}
+
+fn answer(
+    server: &Server<TriggerRequest, TriggerResponse>,
+    call: PendingCall,
+    success: bool,
+    message: String,
+) {
+    if let Err(error) = server.send_response(call.0, TriggerResponse { success, message }) {
+        tracing::warn!(?error, "cannot send a service response");
+    }
+}

@@ -1,0 +1,241 @@
+//! Reward and success of the three tasks (the ones the Gymnasium SO-100 environments offered),
+//! computed from a few geometric facts about the scene. Pure: the physics side fills in
+//! [`TaskObservation`].
+
+use nalgebra::{Matrix3, Vector3};
+
+/// Which task the episode scores.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum TaskKind {
+    /// Dense: reward is minus the distance from the gripper tip to the cube.
+    #[value(name = "touch_cube", alias = "touch-cube")]
+    TouchCube,
+    /// Sparse: reward 1 while the gripper touches the cube.
+    #[value(name = "touch_cube_sparse", alias = "touch-cube-sparse")]
+    TouchCubeSparse,
+    /// Sparse: reward 1 once the cube lies in the bin (optional dense shaping).
+    #[value(name = "cube_to_bin", alias = "cube-to-bin")]
+    CubeToBin,
+}
+
+/// Tip-to-cube-centre distance under which the gripper counts as touching the cube (m): half the
+/// 3 cm cube plus 1.5 cm for the finger pads.
+pub const TOUCH_DISTANCE: f64 = 0.03;
+/// Height above its resting height at which a grasped cube counts as fully lifted (m).
+pub const LIFT_HEIGHT: f64 = 0.05;
+
+/// A box-shaped region (the inside of the bin), as a centre, rotation and half extents.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct OrientedBox {
+    pub center: Vector3<f64>,
+    pub rotation: Matrix3<f64>,
+    pub half_extents: Vector3<f64>,
+}
+
+impl OrientedBox {
+    pub fn contains(&self, point: &Vector3<f64>) -> bool {
+        let local = self.rotation.transpose() * (point - self.center);
+        (0..3).all(|axis| local[axis].abs() <= self.half_extents[axis])
+    }
+}
+
+/// What the tasks need to know about the scene at one instant.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct TaskObservation {
+    pub gripper_tip: Vector3<f64>,
+    pub cube: Vector3<f64>,
+    /// Height of the cube centre when it rests on the table.
+    pub cube_rest_height: f64,
+    pub bin_goal: Vector3<f64>,
+    pub bin_inside: OrientedBox,
+    /// The fixed jaw touches the cube.
+    pub fixed_jaw_contact: bool,
+    /// The moving jaw touches the cube.
+    pub moving_jaw_contact: bool,
+}
+
+impl TaskObservation {
+    fn tip_to_cube(&self) -> f64 {
+        (self.gripper_tip - self.cube).norm()
+    }
+
+    pub fn touching(&self) -> bool {
+        self.fixed_jaw_contact || self.moving_jaw_contact || self.tip_to_cube() < TOUCH_DISTANCE
+    }
+
+    pub fn grasped(&self) -> bool {
+        self.fixed_jaw_contact && self.moving_jaw_contact
+    }
+
+    pub fn cube_in_bin(&self) -> bool {
+        self.bin_inside.contains(&self.cube)
+    }
+}
+
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct TaskOutcome {
+    pub reward: f64,
+    pub success: bool,
+}
+
+/// Scores one instant of the episode.
+pub fn evaluate(kind: TaskKind, dense_shaping: bool, observation: &TaskObservation) -> TaskOutcome {
+    match kind {
+        TaskKind::TouchCube => TaskOutcome {
+            reward: -observation.tip_to_cube(),
+            success: observation.touching(),
+        },
+        TaskKind::TouchCubeSparse => {
+            let success = observation.touching();
+            TaskOutcome {
+                reward: f64::from(u8::from(success)),
+                success,
+            }
+        }
+        TaskKind::CubeToBin => {
+            let success = observation.cube_in_bin();
+            let reward = match (success, dense_shaping) {
+                (true, _) => 1.0,
+                (false, false) => 0.0,
+                (false, true) => cube_to_bin_shaping(observation),
+            };
+            TaskOutcome { reward, success }
+        }
+    }
+}
+
+/// Staged shaping in [0, 0.8): approach the cube, grasp it, lift it, carry it over the bin. Each
+/// stage adds up to 0.2, so any unfinished episode scores below success (1.0).
+fn cube_to_bin_shaping(observation: &TaskObservation) -> f64 {
+    let approach = 1.0 - (10.0 * observation.tip_to_cube()).tanh();
+    let grasped = observation.grasped();
+    let lift = if grasped {
+        ((observation.cube.z - observation.cube_rest_height) / LIFT_HEIGHT).clamp(0.0, 1.0)
+    } else {
+        0.0
+    };
+    let place = if lift > 0.0 {
+        let horizontal = (observation.cube - observation.bin_goal).xy().norm();
+        1.0 - (10.0 * horizontal).tanh()
+    } else {
+        0.0
+    };
+    0.2 * (approach + f64::from(u8::from(grasped)) + lift + place)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn observation() -> TaskObservation {
+        TaskObservation {
+            gripper_tip: Vector3::new(0.0, 0.0, 0.3),
+            cube: Vector3::new(0.2, 0.0, 0.015),
+            cube_rest_height: 0.015,
+            bin_goal: Vector3::new(0.0, 0.25, 0.02),
+            bin_inside: OrientedBox {
+                center: Vector3::new(0.0, 0.25, 0.04),
+                rotation: Matrix3::identity(),
+                half_extents: Vector3::new(0.05, 0.05, 0.04),
+            },
+            fixed_jaw_contact: false,
+            moving_jaw_contact: false,
+        }
+    }
+
+    #[test]
+    fn touch_cube_dense_reward_is_minus_the_distance() {
+        let far = observation();
+        let outcome = evaluate(TaskKind::TouchCube, false, &far);
+        assert!((outcome.reward + (0.04f64 + 0.285 * 0.285).sqrt()).abs() < 1e-12);
+        assert!(!outcome.success);
+        let near = TaskObservation {
+            gripper_tip: Vector3::new(0.2, 0.0, 0.03),
+            ..far
+        };
+        let outcome = evaluate(TaskKind::TouchCube, false, &near);
+        assert!(outcome.success && outcome.reward > -TOUCH_DISTANCE);
+    }
+
+    #[test]
+    fn touch_cube_sparse_counts_contact_or_proximity() {
+        let mut obs = observation();
+        assert_eq!(
+            evaluate(TaskKind::TouchCubeSparse, false, &obs),
+            TaskOutcome {
+                reward: 0.0,
+                success: false
+            }
+        );
+        obs.moving_jaw_contact = true;
+        assert_eq!(
+            evaluate(TaskKind::TouchCubeSparse, false, &obs),
+            TaskOutcome {
+                reward: 1.0,
+                success: true
+            }
+        );
+    }
+
+    #[test]
+    fn cube_to_bin_succeeds_only_inside_the_bin() {
+        let mut obs = observation();
+        assert_eq!(
+            evaluate(TaskKind::CubeToBin, false, &obs),
+            TaskOutcome {
+                reward: 0.0,
+                success: false
+            }
+        );
+        obs.cube = Vector3::new(0.01, 0.24, 0.015);
+        assert_eq!(
+            evaluate(TaskKind::CubeToBin, false, &obs),
+            TaskOutcome {
+                reward: 1.0,
+                success: true
+            }
+        );
+        assert_eq!(evaluate(TaskKind::CubeToBin, true, &obs).reward, 1.0);
+        // Just outside a wall, or above the rim, is not in.
+        obs.cube = Vector3::new(0.06, 0.25, 0.02);
+        assert!(!evaluate(TaskKind::CubeToBin, false, &obs).success);
+        obs.cube = Vector3::new(0.0, 0.25, 0.09);
+        assert!(!evaluate(TaskKind::CubeToBin, false, &obs).success);
+    }
+
+    #[test]
+    fn rotated_bin_box_is_respected() {
+        let rotation =
+            *nalgebra::Rotation3::from_axis_angle(&Vector3::z_axis(), std::f64::consts::FRAC_PI_2)
+                .matrix();
+        let region = OrientedBox {
+            center: Vector3::zeros(),
+            rotation,
+            half_extents: Vector3::new(0.1, 0.01, 0.1),
+        };
+        assert!(region.contains(&Vector3::new(0.0, 0.09, 0.0)));
+        assert!(!region.contains(&Vector3::new(0.09, 0.0, 0.0)));
+    }
+
+    #[test]
+    fn dense_shaping_grows_through_the_stages_and_stays_below_success() {
+        let mut obs = observation();
+        let start = evaluate(TaskKind::CubeToBin, true, &obs).reward;
+        obs.gripper_tip = obs.cube;
+        let touching = evaluate(TaskKind::CubeToBin, true, &obs).reward;
+        obs.fixed_jaw_contact = true;
+        obs.moving_jaw_contact = true;
+        let grasped = evaluate(TaskKind::CubeToBin, true, &obs).reward;
+        obs.cube.z += LIFT_HEIGHT;
+        obs.gripper_tip = obs.cube;
+        let lifted = evaluate(TaskKind::CubeToBin, true, &obs).reward;
+        obs.cube = Vector3::new(obs.bin_goal.x, obs.bin_goal.y, 0.2);
+        obs.gripper_tip = obs.cube;
+        let over_bin = evaluate(TaskKind::CubeToBin, true, &obs).reward;
+        assert!(
+            start < touching && touching < grasped && grasped < lifted && lifted < over_bin,
+            "{start} {touching} {grasped} {lifted} {over_bin}"
+        );
+        assert!(over_bin < 0.8 + 1e-12);
+    }
+}

@@ -1,0 +1,230 @@
+//! The simulated SO-101 and its cube-to-bin scene: the bridge between MuJoCo's arrays and the
+//! stack's view (joints in contract order, cube pose, task observation).
+
+use nalgebra::{Matrix3, Vector3};
+use so101_core::robot::{JointLimit, JointPositions, JOINT_COUNT, JOINT_NAMES};
+
+use crate::{
+    mujoco::{MujocoError, ObjectKind, Simulation},
+    placement::CubeStart,
+    task::{OrientedBox, TaskObservation},
+};
+
+#[derive(Debug, thiserror::Error)]
+pub enum WorldError {
+    #[error(transparent)]
+    Mujoco(#[from] MujocoError),
+    #[error("the scene has no {kind:?} named {name:?}, which the node needs")]
+    Missing { kind: ObjectKind, name: String },
+    #[error(
+        "the control period {period} s is not a whole number of physics steps of {timestep} s"
+    )]
+    Period { period: f64, timestep: f64 },
+}
+
+/// State of the arm in contract order (rad, rad/s, N m).
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct ArmState {
+    pub position: JointPositions,
+    pub velocity: JointPositions,
+    pub effort: JointPositions,
+}
+
+/// World position and orientation (w, x, y, z) of the cube.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct CubePose {
+    pub position: [f64; 3],
+    pub orientation: [f64; 4],
+}
+
+/// Indices into the model, resolved once by name.
+struct SceneIds {
+    joint_qpos: [usize; JOINT_COUNT],
+    joint_dof: [usize; JOINT_COUNT],
+    actuator: [usize; JOINT_COUNT],
+    cube_body: usize,
+    cube_qpos: usize,
+    cube_dof: usize,
+    cube_geom: usize,
+    fixed_jaw_body: usize,
+    moving_jaw_body: usize,
+    gripper_tip_site: usize,
+    cube_site: usize,
+    bin_goal_site: usize,
+    bin_inside_site: usize,
+}
+
+pub struct World {
+    sim: Simulation,
+    ids: SceneIds,
+    limits: [JointLimit; JOINT_COUNT],
+    targets: JointPositions,
+    steps_per_period: usize,
+    cube_rest_height: f64,
+}
+
+fn require(sim: &Simulation, kind: ObjectKind, name: &str) -> Result<usize, WorldError> {
+    sim.id(kind, name).ok_or_else(|| WorldError::Missing {
+        kind,
+        name: name.to_owned(),
+    })
+}
+
+impl World {
+    /// Binds the scene: every joint, actuator, site and body the node uses must exist by name.
+    pub fn new(sim: Simulation, control_period: f64) -> Result<Self, WorldError> {
+        let timestep = sim.timestep();
+        let ratio = control_period / timestep;
+        if ratio < 0.5 || (ratio - ratio.round()).abs() > 1e-6 {
+            return Err(WorldError::Period {
+                period: control_period,
+                timestep,
+            });
+        }
+        let mut joint_qpos = [0; JOINT_COUNT];
+        let mut joint_dof = [0; JOINT_COUNT];
+        let mut actuator = [0; JOINT_COUNT];
+        let mut limits = [JointLimit::new(0.0, 0.0); JOINT_COUNT];
+        for (index, name) in JOINT_NAMES.iter().enumerate() {
+            let joint = require(&sim, ObjectKind::Joint, name)?;
+            joint_qpos[index] = sim.joint_qpos_address(joint);
+            joint_dof[index] = sim.joint_dof_address(joint);
+            actuator[index] = require(&sim, ObjectKind::Actuator, name)?;
+            let (min, max) = sim.joint_range(joint);
+            limits[index] = JointLimit::new(min, max);
+        }
+        let cube_joint = require(&sim, ObjectKind::Joint, "cube_joint")?;
+        let ids = SceneIds {
+            joint_qpos,
+            joint_dof,
+            actuator,
+            cube_body: require(&sim, ObjectKind::Body, "cube")?,
+            cube_qpos: sim.joint_qpos_address(cube_joint),
+            cube_dof: sim.joint_dof_address(cube_joint),
+            cube_geom: require(&sim, ObjectKind::Geom, "cube_geom")?,
+            fixed_jaw_body: require(&sim, ObjectKind::Body, "gripper")?,
+            moving_jaw_body: require(&sim, ObjectKind::Body, "moving_jaw")?,
+            gripper_tip_site: require(&sim, ObjectKind::Site, "gripper_tip")?,
+            cube_site: require(&sim, ObjectKind::Site, "cube_site")?,
+            bin_goal_site: require(&sim, ObjectKind::Site, "bin_goal")?,
+            bin_inside_site: require(&sim, ObjectKind::Site, "bin_inside")?,
+        };
+        let cube_rest_height = sim.qpos()[ids.cube_qpos + 2];
+        let mut world = Self {
+            sim,
+            ids,
+            limits,
+            targets: [0.0; JOINT_COUNT],
+            steps_per_period: ratio.round() as usize,
+            cube_rest_height,
+        };
+        world.reset(None);
+        Ok(world)
+    }
+
+    /// Joint limits as the scene declares them (commands are clamped to these).
+    pub fn limits(&self) -> &[JointLimit; JOINT_COUNT] {
+        &self.limits
+    }
+
+    pub fn targets_mut(&mut self) -> &mut JointPositions {
+        &mut self.targets
+    }
+
+    pub fn time(&self) -> f64 {
+        self.sim.time()
+    }
+
+    pub fn steps_per_period(&self) -> usize {
+        self.steps_per_period
+    }
+
+    /// Starts a new episode: arm at home (all joints 0) and holding there, the cube at `cube` (or
+    /// where the scene puts it), time 0.
+    pub fn reset(&mut self, cube: Option<CubeStart>) {
+        self.sim.reset();
+        self.targets = [0.0; JOINT_COUNT];
+        if let Some(start) = cube {
+            let qpos = self.sim.qpos_mut();
+            let base = self.ids.cube_qpos;
+            qpos[base] = start.x;
+            qpos[base + 1] = start.y;
+            qpos[base + 2] = self.cube_rest_height;
+            qpos[base + 3..base + 7].copy_from_slice(&start.quaternion());
+        }
+        let cube_dof = self.ids.cube_dof;
+        self.sim.qvel_mut()[cube_dof..cube_dof + 6].fill(0.0);
+        self.write_controls();
+        self.sim.forward();
+    }
+
+    /// Advances one control period with the current targets. Returns false when MuJoCo reported a
+    /// numerical problem during the period (it resets the state itself in that case).
+    pub fn advance(&mut self) -> bool {
+        self.write_controls();
+        let warnings_before = self.sim.warning_count();
+        for _ in 0..self.steps_per_period {
+            self.sim.step();
+        }
+        self.sim.warning_count() == warnings_before
+    }
+
+    fn write_controls(&mut self) {
+        let actuator = self.ids.actuator;
+        let targets = self.targets;
+        let ctrl = self.sim.ctrl_mut();
+        for joint in 0..JOINT_COUNT {
+            ctrl[actuator[joint]] = targets[joint];
+        }
+    }
+
+    pub fn arm_state(&self) -> ArmState {
+        let qpos = self.sim.qpos();
+        let qvel = self.sim.qvel();
+        let force = self.sim.actuator_force();
+        let mut state = ArmState::default();
+        for joint in 0..JOINT_COUNT {
+            state.position[joint] = qpos[self.ids.joint_qpos[joint]];
+            state.velocity[joint] = qvel[self.ids.joint_dof[joint]];
+            state.effort[joint] = force[self.ids.actuator[joint]];
+        }
+        state
+    }
+
+    pub fn cube_pose(&self) -> CubePose {
+        let (position, orientation) = self.sim.body_pose(self.ids.cube_body);
+        CubePose {
+            position,
+            orientation,
+        }
+    }
+
+    pub fn task_observation(&self) -> TaskObservation {
+        let vector = |site| Vector3::from(self.sim.site_position(site));
+        let (mut fixed_jaw_contact, mut moving_jaw_contact) = (false, false);
+        for (first, second) in self.sim.contacts() {
+            let other = match (first == self.ids.cube_geom, second == self.ids.cube_geom) {
+                (true, false) => second,
+                (false, true) => first,
+                _ => continue,
+            };
+            let body = self.sim.geom_body(other);
+            fixed_jaw_contact |= body == self.ids.fixed_jaw_body;
+            moving_jaw_contact |= body == self.ids.moving_jaw_body;
+        }
+        let inside = self.ids.bin_inside_site;
+        TaskObservation {
+            gripper_tip: vector(self.ids.gripper_tip_site),
+            cube: vector(self.ids.cube_site),
+            cube_rest_height: self.cube_rest_height,
+            bin_goal: vector(self.ids.bin_goal_site),
+            bin_inside: OrientedBox {
+                center: vector(inside),
+                rotation: Matrix3::from_row_slice(&self.sim.site_rotation(inside)),
+                half_extents: Vector3::from(self.sim.site_size(inside)),
+            },
+            fixed_jaw_contact,
+            moving_jaw_contact,
+        }
+    }
+}

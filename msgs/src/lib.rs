@@ -1,0 +1,34 @@
+//! The standard ROS 2 messages and services the SO-101 stack speaks, as Rust types.
+//!
+//! Each type carries its ROS type name and its exact field definition (the `.msg`/`.srv` text without
+//! comments), so nodes can create topics with the right DDS type and the recorder can write the
+//! definition as an MCAP `ros2msg` schema. Only standard types are used, so every rclpy tool can talk to
+//! the stack without building a message package. Field order must equal the `.msg` order: the CDR
+//! encoding is positional.
+
+pub mod builtin_interfaces;
+pub mod diagnostic_msgs;
+pub mod geometry_msgs;
+pub mod rosgraph_msgs;
+pub mod sensor_msgs;
+pub mod std_msgs;
+pub mod std_srvs;
+mod type_info;
+
+pub use type_info::{RosMessage, RosService, TypeInfo};
+
+/// Implements [`ros2_client::Message`] and [`RosMessage`] for a message struct.
+macro_rules! ros_message {
+    ($ty:ty, $package:literal, $name:literal, $definition:expr $(, deps: [$($dep:ty),* $(,)?])? $(,)?) => {
+        impl ros2_client::Message for $ty {}
+        impl $crate::RosMessage for $ty {
+            const INFO: &'static $crate::TypeInfo = &$crate::TypeInfo {
+                package: $package,
+                name: $name,
+                definition: $definition,
+                dependencies: &[$($(<$dep as $crate::RosMessage>::INFO),*)?],
+            };
+        }
+    };
+}
+pub(crate) use ros_message;

@@ -1,0 +1,15 @@
+#!/usr/bin/env bash
+# The main job: set up, then run the simulated SO-101 headless with its built-in pick-and-place demo,
+# and watch it from an rclpy peer that prints the arm, the cube and the task once a second.
+# Both run in one private network namespace (DDS stays on this machine). Ctrl-C stops both.
+#
+#   scripts/run_sim_demo.sh [--duration SECONDS] [extra so101_sim_node flags, e.g. --lite]
+set -euo pipefail
+
+REPO_ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
+export CARGO_TARGET_DIR="${CARGO_TARGET_DIR:-${HOME}/.cache/so101/target}"
+
+"${REPO_ROOT}/scripts/setup.sh"
+exec "${REPO_ROOT}/scripts/isolated" bash -c '
+    "$0/.venv/bin/python" "$0/scripts/watch_sim.py" "$@"
+' "${REPO_ROOT}" --node "${CARGO_TARGET_DIR}/release/so101_sim_node" "$@"

@@ -1,0 +1,25 @@
+#!/usr/bin/env bash
+# The project's test command (README, CI): set up, check formatting and lints, run the Rust unit
+# and integration tests, then the rclpy integration tests against the real nodes. Everything that
+# may open a DDS participant runs inside a private network namespace (scripts/isolated).
+set -euo pipefail
+
+REPO_ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
+cd "${REPO_ROOT}"
+export CARGO_TARGET_DIR="${CARGO_TARGET_DIR:-${HOME}/.cache/so101/target}"
+
+log() { printf '\033[1mtest:\033[0m %s\n' "$*" >&2; }
+
+scripts/setup.sh
+
+log "cargo fmt --check"
+cargo fmt --all -- --check
+log "cargo clippy"
+cargo clippy --release --locked --workspace --all-targets -- -D warnings
+
+log "Rust tests (in a private network namespace)"
+scripts/isolated cargo test --release --locked --workspace
+
+log "rclpy integration tests (in a private network namespace)"
+export SO101_BIN_DIR="${CARGO_TARGET_DIR}/release"
+scripts/isolated .venv/bin/python -m pytest -q tests/integration "$@"

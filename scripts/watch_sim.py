@@ -1,0 +1,90 @@
+#!/usr/bin/env python3
+"""Main job: start so101_sim_node with its demo and watch it from an rclpy node.
+
+Prints once a second what a ROS 2 user would see on the topics: sim time, joint positions, the
+cube's position and the task's reward and success. Must run inside a private network namespace
+(scripts/run_sim_demo.sh takes care of it).
+"""
+import argparse
+import signal
+import subprocess
+import sys
+import time
+
+import rclpy
+from geometry_msgs.msg import PoseStamped
+from rclpy.node import Node
+from sensor_msgs.msg import JointState
+from std_msgs.msg import Bool, Float64
+
+
+class Watcher(Node):
+    def __init__(self):
+        super().__init__("sim_watcher")
+        self.joints = None
+        self.cube = None
+        self.reward = None
+        self.success = False
+        self.successes = 0
+        self.create_subscription(JointState, "/joint_states", self._on_joints, 10)
+        self.create_subscription(PoseStamped, "/cube/pose", self._on_cube, 10)
+        self.create_subscription(Float64, "/task/reward", self._on_reward, 10)
+        self.create_subscription(Bool, "/task/success", self._on_success, 10)
+
+    def _on_joints(self, msg):
+        self.joints = msg
+
+    def _on_cube(self, msg):
+        self.cube = msg.pose.position
+
+    def _on_reward(self, msg):
+        self.reward = msg.data
+
+    def _on_success(self, msg):
+        if msg.data and not self.success:
+            self.successes += 1
+        self.success = msg.data
+
+    def line(self):
+        if self.joints is None:
+            return "waiting for /joint_states ..."
+        stamp = self.joints.header.stamp.sec + self.joints.header.stamp.nanosec * 1e-9
+        joints = " ".join(f"{n[:6]}={p:+.2f}" for n, p in zip(self.joints.name, self.joints.position))
+        cube = f"cube=({self.cube.x:.3f},{self.cube.y:.3f},{self.cube.z:.3f})" if self.cube else "cube=?"
+        return (f"t={stamp:7.2f}s {joints} {cube} reward={self.reward if self.reward is not None else float('nan'):.2f}"
+                f" in_bin={self.success} drops_in_bin={self.successes}")
+
+
+def main():
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--node", required=True, help="path of the so101_sim_node binary")
+    parser.add_argument("--duration", type=float, default=None, help="stop after this many seconds")
+    args, node_flags = parser.parse_known_args()
+
+    sim = subprocess.Popen([args.node, "--demo", *node_flags])
+    rclpy.init()
+    watcher = Watcher()
+    stop = {"now": False}
+    signal.signal(signal.SIGINT, lambda *_: stop.update(now=True))
+    signal.signal(signal.SIGTERM, lambda *_: stop.update(now=True))
+    start = next_print = time.monotonic()
+    try:
+        while not stop["now"] and sim.poll() is None:
+            rclpy.spin_once(watcher, timeout_sec=0.1)
+            if time.monotonic() >= next_print:
+                print(watcher.line(), flush=True)
+                next_print += 1.0
+            if args.duration is not None and time.monotonic() - start > args.duration:
+                break
+    finally:
+        if sim.poll() is None:
+            sim.send_signal(signal.SIGINT)
+        code = sim.wait(timeout=10)
+        watcher.destroy_node()
+        rclpy.shutdown()
+    print(f"so101_sim_node exited with {code}; cube dropped in the bin {watcher.successes} time(s)")
+    return 0 if code == 0 else 1
+
+
+if __name__ == "__main__":
+    sys.exit(main())
