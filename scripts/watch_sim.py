@@ -6,6 +6,7 @@ cube's position and the task's reward and success. Must run inside a private net
 (scripts/run_sim_demo.sh takes care of it).
 """
 import argparse
+import os
 import signal
 import subprocess
 import sys
@@ -61,7 +62,9 @@ def main():
     parser.add_argument("--duration", type=float, default=None, help="stop after this many seconds")
     args, node_flags = parser.parse_known_args()
 
-    sim = subprocess.Popen([args.node, "--demo", *node_flags])
+    # The venv's Python runs with LD_LIBRARY_PATH pointing into the ROS wheels; the Rust node needs none.
+    node_env = {k: v for k, v in os.environ.items() if k != "LD_LIBRARY_PATH"}
+    sim = subprocess.Popen([args.node, "--demo", *node_flags], env=node_env)
     rclpy.init()
     watcher = Watcher()
     stop = {"now": False}

@@ -7,7 +7,7 @@ use so101_core::robot::{JointPositions, JOINT_COUNT};
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Waypoint {
     pub targets: JointPositions,
-    /// Seconds to move from the previous waypoint to this one (smoothstep profile).
+    /// Seconds to move from the previous waypoint to this one (linear, as the script was tuned).
     pub move_seconds: f64,
     /// Seconds to hold this pose before the next move starts.
     pub hold_seconds: f64,
@@ -21,17 +21,23 @@ const fn waypoint(targets: JointPositions, move_seconds: f64, hold_seconds: f64)
     }
 }
 
-/// Pick the cube at its default spawn position and drop it in the bin (joint order of the contract).
-pub const PICK_AND_PLACE: [Waypoint; 9] = [
-    waypoint([0.0, 0.0, 0.0, 0.0, 0.0, 0.0], 0.5, 0.5),
-    waypoint([0.0, 0.0, 0.0, 0.0, 0.0, 1.2], 0.8, 0.2),
-    waypoint([0.0, 0.0, 0.0, 0.0, 0.0, 1.2], 1.0, 0.3),
-    waypoint([0.0, 0.0, 0.0, 0.0, 0.0, 1.2], 0.8, 0.3),
-    waypoint([0.0, 0.0, 0.0, 0.0, 0.0, 0.0], 0.6, 0.4),
-    waypoint([0.0, 0.0, 0.0, 0.0, 0.0, 0.0], 1.0, 0.2),
-    waypoint([0.0, 0.0, 0.0, 0.0, 0.0, 0.0], 1.2, 0.3),
-    waypoint([0.0, 0.0, 0.0, 0.0, 0.0, 1.2], 0.5, 0.6),
-    waypoint([0.0, 0.0, 0.0, 0.0, 0.0, 0.0], 1.2, 0.5),
+/// Pick the cube at its default spawn position (0.23, -0.05) and drop it in the bin (joint order of
+/// the contract; found by a scripted grasp planner in this scene, about 11 s per run).
+pub const PICK_AND_PLACE: [Waypoint; 8] = [
+    waypoint([0.0, 0.0, 0.0, 0.0, 0.0, 0.0], 0.0, 0.5),
+    // above the cube, gripper open
+    waypoint([0.287, -0.157, 0.151, 1.576, 0.336, 0.9], 1.5, 0.3),
+    // down around it
+    waypoint([0.287, -0.043, 0.527, 1.087, 0.336, 0.9], 1.0, 0.3),
+    // close
+    waypoint([0.287, -0.043, 0.527, 1.087, 0.336, -0.17], 0.5, 0.5),
+    // lift
+    waypoint([0.263, -0.154, -0.060, 1.650, 0.312, -0.17], 1.0, 0.3),
+    // over the bin
+    waypoint([1.299, 0.106, -0.329, 1.650, 0.083, -0.17], 1.5, 0.5),
+    // release
+    waypoint([1.299, 0.106, -0.329, 1.650, 0.083, 0.9], 0.3, 1.0),
+    waypoint([0.0, 0.0, 0.0, 0.0, 0.0, 0.0], 1.5, 0.5),
 ];
 
 /// Plays a list of waypoints, starting from the home pose (all zero).
@@ -57,15 +63,16 @@ impl Script {
 
     /// Targets `t` seconds after the start of a run (the last pose holds after the end).
     pub fn targets_at(&self, t: f64) -> JointPositions {
+        let t = t.max(0.0);
         let mut from = [0.0; JOINT_COUNT];
         let mut start = 0.0;
         for waypoint in &self.waypoints {
             let move_end = start + waypoint.move_seconds;
             if t < move_end {
+                // t >= start here, so t < move_end implies move_seconds > 0.
                 let progress = ((t - start) / waypoint.move_seconds).clamp(0.0, 1.0);
-                let eased = progress * progress * (3.0 - 2.0 * progress);
                 return std::array::from_fn(|joint| {
-                    from[joint] + eased * (waypoint.targets[joint] - from[joint])
+                    from[joint] + progress * (waypoint.targets[joint] - from[joint])
                 });
             }
             start = move_end + waypoint.hold_seconds;

@@ -12,7 +12,7 @@ use so101_core::ros::{shutdown::Shutdown, RosNode};
 use crate::{
     cli::Args,
     demo::{Script, PICK_AND_PLACE},
-    mujoco::{self, Simulation},
+    mujoco,
     pacing::{Pacer, TimeMode},
     placement::{CubePlacer, SpawnArea},
     ros_io::{CommandInbox, Frame, FramePublisher, NodeDiagnostics, SimServices},
@@ -20,7 +20,8 @@ use crate::{
     world::World,
 };
 
-/// Where /sim/reset may put the cube (world frame, m): reachable and graspable, clear of the bin.
+/// Where /sim/reset may put the cube (world frame, m): every point was picked into the bin by a
+/// scripted grasp in this scene, and it stays at least 6.5 cm clear of the bin.
 pub const CUBE_SPAWN_AREA: SpawnArea = SpawnArea {
     x: (0.15, 0.28),
     y: (-0.08, 0.12),
@@ -38,7 +39,7 @@ pub fn run(args: Args) -> Result<()> {
     } else {
         args.speed
     };
-    let simulation = load_scene(&args)?;
+    let simulation = scene::load(&args.scene, args.lite)?;
     let mut world =
         World::new(simulation, 1.0 / args.rate).context("the scene does not fit the node")?;
     tracing::info!(
@@ -168,22 +169,6 @@ pub fn run(args: Args) -> Result<()> {
     tracing::info!(sim_time = world.time(), "shutting down");
     drop(publisher);
     Ok(())
-}
-
-fn load_scene(args: &Args) -> Result<Simulation> {
-    let path = &args.scene;
-    if !args.lite {
-        return Simulation::from_xml_file(path).with_context(|| {
-            format!(
-                "{} (the visual meshes come from scripts/setup.sh; --lite runs without them)",
-                path.display()
-            )
-        });
-    }
-    let xml = std::fs::read_to_string(path)
-        .with_context(|| format!("cannot read the scene {}", path.display()))?;
-    let lite = scene::lite_variant(&xml).with_context(|| format!("scene {}", path.display()))?;
-    Ok(Simulation::from_xml_text(&lite, "so101_scene_lite.xml")?)
 }
 
 fn frame(

@@ -1,15 +1,38 @@
 //! The scene variants: the full scene with the visual meshes fetched at set-up, and the mesh-free
 //! "lite" variant derived from it, so both share one kinematic and collision description.
+//! The transform is pure; `load` reads the file and compiles the chosen variant.
 
+use std::path::Path;
+
+use anyhow::Context;
 use quick_xml::{
     events::{BytesStart, Event},
     Reader, Writer,
 };
 
+use crate::mujoco::Simulation;
+
 #[derive(Debug, thiserror::Error)]
 pub enum SceneError {
     #[error("scene XML is malformed: {0}")]
     Xml(String),
+}
+
+/// Loads the scene at `path`, in its lite variant when `lite` is set.
+pub fn load(path: &Path, lite: bool) -> anyhow::Result<Simulation> {
+    if !lite {
+        return Simulation::from_xml_file(path).with_context(|| {
+            format!(
+                "{} (the visual meshes come from scripts/setup.sh; --lite runs without them)",
+                path.display()
+            )
+        });
+    }
+    let xml = std::fs::read_to_string(path)
+        .with_context(|| format!("cannot read the scene {}", path.display()))?;
+    let lite_xml = lite_variant(&xml).with_context(|| format!("scene {}", path.display()))?;
+    Simulation::from_xml_text(&lite_xml, "so101_scene_lite.xml")
+        .with_context(|| format!("lite variant of {}", path.display()))
 }
 
 /// The lite variant of an MJCF scene: every `<mesh>` asset and every geom that uses a mesh is

@@ -61,6 +61,9 @@ pub struct World {
     targets: JointPositions,
     steps_per_period: usize,
     cube_rest_height: f64,
+    /// Sim time at which the current episode started: MuJoCo restarts its clock at every reset,
+    /// but /clock must never go backwards.
+    episode_start_time: f64,
 }
 
 fn require(sim: &Simulation, kind: ObjectKind, name: &str) -> Result<usize, WorldError> {
@@ -117,6 +120,7 @@ impl World {
             targets: [0.0; JOINT_COUNT],
             steps_per_period: ratio.round() as usize,
             cube_rest_height,
+            episode_start_time: 0.0,
         };
         world.reset(None);
         Ok(world)
@@ -131,8 +135,9 @@ impl World {
         &mut self.targets
     }
 
+    /// Sim time since the world was created (monotonic across episodes).
     pub fn time(&self) -> f64 {
-        self.sim.time()
+        self.episode_start_time + self.sim.time()
     }
 
     pub fn steps_per_period(&self) -> usize {
@@ -140,8 +145,9 @@ impl World {
     }
 
     /// Starts a new episode: arm at home (all joints 0) and holding there, the cube at `cube` (or
-    /// where the scene puts it), time 0.
+    /// where the scene puts it). Sim time goes on from where the last episode ended.
     pub fn reset(&mut self, cube: Option<CubeStart>) {
+        self.episode_start_time += self.sim.time();
         self.sim.reset();
         self.targets = [0.0; JOINT_COUNT];
         if let Some(start) = cube {

@@ -87,6 +87,15 @@ pub struct Simulation {
     data: NonNull<ffi::mjData>,
 }
 
+impl std::fmt::Debug for Simulation {
+    fn fmt(&self, formatter: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        formatter
+            .debug_struct("Simulation")
+            .field("time", &self.time())
+            .finish_non_exhaustive()
+    }
+}
+
 // The model and data are owned exclusively; MuJoCo keeps no thread-local state for them.
 unsafe impl Send for Simulation {}
 

@@ -1,0 +1,147 @@
+//! The simulated arm and scene under MuJoCo 2.2.2, without ROS: the scene binds, the servos track,
+//! episodes place the cube where asked, and the demo really puts the cube in the bin.
+
+use std::path::PathBuf;
+
+use so101_core::robot::{JOINT_COUNT, JOINT_LIMITS};
+use so101_sim_node::{
+    cli::default_scene,
+    demo::{Script, PICK_AND_PLACE},
+    placement::CubeStart,
+    run::CUBE_SPAWN_AREA,
+    scene,
+    task::{evaluate, TaskKind},
+    world::World,
+};
+
+const RATE_HZ: f64 = 100.0;
+
+fn world(lite: bool) -> World {
+    let simulation = scene::load(&PathBuf::from(default_scene()), lite).expect("the scene loads");
+    World::new(simulation, 1.0 / RATE_HZ).expect("the scene has every element the node needs")
+}
+
+fn advance_seconds(world: &mut World, seconds: f64) {
+    for _ in 0..(seconds * RATE_HZ).round() as usize {
+        assert!(world.advance(), "MuJoCo reported a numerical problem");
+    }
+}
+
+#[test]
+fn scene_limits_match_the_robot_model() {
+    let world = world(true);
+    for (scene, model) in world.limits().iter().zip(JOINT_LIMITS) {
+        assert!((scene.min - model.min).abs() < 1e-3 && (scene.max - model.max).abs() < 1e-3);
+    }
+    assert_eq!(world.steps_per_period(), 5);
+}
+
+#[test]
+fn servos_track_a_pose_within_tolerance() {
+    let mut world = world(true);
+    let pose = [0.5, -0.4, 0.6, 0.8, -1.0, 1.0];
+    *world.targets_mut() = pose;
+    advance_seconds(&mut world, 1.5);
+    let state = world.arm_state();
+    for (joint, target) in pose.iter().enumerate() {
+        assert!(
+            (state.position[joint] - target).abs() < 0.03,
+            "joint {joint}: {state:?}"
+        );
+        assert!(
+            state.velocity[joint].abs() < 0.05,
+            "joint {joint} still moving: {state:?}"
+        );
+    }
+    assert!((world.time() - 1.5).abs() < 1e-9);
+}
+
+#[test]
+fn reset_places_the_cube_and_keeps_time_monotonic() {
+    let mut world = world(true);
+    advance_seconds(&mut world, 0.5);
+    let start = CubeStart {
+        x: CUBE_SPAWN_AREA.x.1,
+        y: CUBE_SPAWN_AREA.y.0,
+        yaw: 0.3,
+    };
+    world.reset(Some(start));
+    assert!(world.time() >= 0.5, "sim time went backwards on reset");
+    assert_eq!(world.arm_state().position, [0.0; JOINT_COUNT]);
+    advance_seconds(&mut world, 1.0);
+    let cube = world.cube_pose();
+    assert!(
+        (cube.position[0] - start.x).abs() < 2e-3 && (cube.position[1] - start.y).abs() < 2e-3,
+        "{cube:?}"
+    );
+    assert!(
+        (cube.position[2] - 0.765).abs() < 2e-3,
+        "cube not resting on the table: {cube:?}"
+    );
+    let outcome = evaluate(TaskKind::CubeToBin, false, &world.task_observation());
+    assert!(!outcome.success);
+}
+
+fn run_demo(lite: bool) {
+    let mut world = world(lite);
+    let script = Script::new(&PICK_AND_PLACE);
+    let start = world.time();
+    let mut grasped_while_lifted = false;
+    while world.time() - start < script.duration() {
+        *world.targets_mut() = script.targets_at(world.time() - start);
+        assert!(world.advance());
+        let observation = world.task_observation();
+        grasped_while_lifted |=
+            observation.grasped() && observation.cube.z > observation.cube_rest_height + 0.03;
+    }
+    advance_seconds(&mut world, 0.5);
+    let observation = world.task_observation();
+    assert!(
+        grasped_while_lifted,
+        "the cube was never carried between both jaws"
+    );
+    assert!(
+        observation.cube_in_bin(),
+        "cube ended at {:?}",
+        observation.cube
+    );
+    assert_eq!(
+        evaluate(TaskKind::CubeToBin, false, &observation).reward,
+        1.0
+    );
+}
+
+#[test]
+fn demo_puts_the_cube_in_the_bin_lite() {
+    run_demo(true);
+}
+
+#[test]
+fn demo_puts_the_cube_in_the_bin_with_meshes() {
+    run_demo(false);
+}
+
+#[test]
+fn bad_scenes_give_errors_not_exits() {
+    let missing = scene::load(&PathBuf::from("/nonexistent/scene.xml"), false).unwrap_err();
+    assert!(
+        format!("{missing:#}").contains("/nonexistent/scene.xml"),
+        "{missing:#}"
+    );
+    let dir = std::env::temp_dir().join(format!("so101-bad-scene-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let bad = dir.join("bad.xml");
+    std::fs::write(
+        &bad,
+        "<mujoco><worldbody><body><joint type=\"bogus\"/></body></worldbody></mujoco>",
+    )
+    .unwrap();
+    for lite in [false, true] {
+        let error = format!("{:#}", scene::load(&bad, lite).unwrap_err());
+        assert!(
+            error.to_lowercase().contains("bogus") || error.contains("invalid"),
+            "{error}"
+        );
+    }
+    std::fs::remove_dir_all(&dir).unwrap();
+}

@@ -1,0 +1,111 @@
+#!/usr/bin/env bash
+# Create (or update) the project's Python environment .venv in the repository root:
+# rclpy (ROS 2 Jazzy PyPI wheels), the standard message packages, Fast DDS and pytest, all pinned
+# in scripts/requirements-ros.txt.
+#
+# Idempotent: a stamp in .venv holds the hash of the requirements file and the interpreter version,
+# so a second run with unchanged requirements returns at once. A venv made by another Python
+# minor version is rebuilt from scratch.
+#
+# Environment:
+#   PYTHON   interpreter to build the venv with (default: python3; must be CPython 3.11 or 3.12,
+#            the only versions the ros-jazzy-* wheels exist for)
+#   VENV     where to put the venv (default: <repo>/.venv)
+#
+# Afterwards: `. scripts/ros_env.sh` (optional, see there), and run anything that opens a DDS
+# participant inside `scripts/isolated`.
+set -euo pipefail
+
+REPO_ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
+REQUIREMENTS="${REPO_ROOT}/scripts/requirements-ros.txt"
+VENV="${VENV:-${REPO_ROOT}/.venv}"
+STAMP="${VENV}/.so101-requirements.stamp"
+
+log() { printf 'setup_python: %s\n' "$*" >&2; }
+die() { printf 'setup_python: ERROR: %s\n' "$*" >&2; exit 1; }
+
+[ -f "${REQUIREMENTS}" ] || die "missing ${REQUIREMENTS}"
+
+# Pick the interpreter: $PYTHON if given, else python3, falling back to python3.12/python3.11
+# when python3 is another version.
+py_version_of() { "$1" -c 'import sys; print("%d.%d" % sys.version_info[:2])' 2>/dev/null; }
+supported() { case "$1" in 3.11|3.12) return 0 ;; *) return 1 ;; esac; }
+
+if [ -n "${PYTHON:-}" ]; then
+    command -v "${PYTHON}" >/dev/null 2>&1 || die "PYTHON=${PYTHON} not found"
+    PY_VERSION="$(py_version_of "${PYTHON}")" || die "PYTHON=${PYTHON} does not run (a pyenv shim of a version that is not active?)"
+    supported "${PY_VERSION}" ||
+        die "PYTHON=${PYTHON} is Python ${PY_VERSION}; the ros-jazzy-* wheels need CPython 3.11 or 3.12"
+else
+    PYTHON=""
+    for candidate in python3 python3.12 python3.11; do
+        command -v "${candidate}" >/dev/null 2>&1 || continue
+        version="$(py_version_of "${candidate}")" || continue
+        if supported "${version}"; then PYTHON="${candidate}"; PY_VERSION="${version}"; break; fi
+    done
+    [ -n "${PYTHON}" ] ||
+        die "no CPython 3.11 or 3.12 found (tried python3, python3.12, python3.11); set PYTHON=/path/to/python3.11"
+fi
+
+sha256_of() {
+    if command -v sha256sum >/dev/null 2>&1; then sha256sum "$1" | cut -d' ' -f1
+    else "${PYTHON}" -c 'import hashlib,sys; print(hashlib.sha256(open(sys.argv[1],"rb").read()).hexdigest())' "$1"
+    fi
+}
+
+WANT="requirements=$(sha256_of "${REQUIREMENTS}") python=${PY_VERSION}"
+
+# Fast path: nothing changed since the last successful run.
+if [ -x "${VENV}/bin/python" ] && [ -f "${STAMP}" ] && [ "$(cat "${STAMP}")" = "${WANT}" ]; then
+    log "${VENV} is up to date (Python ${PY_VERSION})"
+    exit 0
+fi
+
+# Serialize concurrent runs (two shells, CI steps) on one venv.
+mkdir -p "$(dirname "${VENV}")"
+if command -v flock >/dev/null 2>&1; then
+    exec 9>"${VENV}.lock"
+    flock 9
+    # Another run may have finished the work while we waited.
+    if [ -x "${VENV}/bin/python" ] && [ -f "${STAMP}" ] && [ "$(cat "${STAMP}")" = "${WANT}" ]; then
+        log "${VENV} is up to date (Python ${PY_VERSION})"
+        exit 0
+    fi
+fi
+
+# A venv of another Python version (or a broken one) cannot be upgraded in place: rebuild it.
+if [ -e "${VENV}" ]; then
+    have="$(py_version_of "${VENV}/bin/python" || true)"
+    if [ "${have}" != "${PY_VERSION}" ]; then
+        log "removing ${VENV} (Python ${have:-unknown}, want ${PY_VERSION})"
+        rm -rf "${VENV}"
+    fi
+fi
+
+if [ ! -x "${VENV}/bin/python" ]; then
+    log "creating ${VENV} with $(command -v "${PYTHON}") (Python ${PY_VERSION})"
+    "${PYTHON}" -m venv "${VENV}"
+fi
+
+rm -f "${STAMP}"
+log "installing ${REQUIREMENTS#"${REPO_ROOT}"/}"
+"${VENV}/bin/python" -m pip install --quiet --disable-pip-version-check -r "${REQUIREMENTS}"
+
+# Smoke test: the wheels import and the Fast DDS RMW library loads. No DDS participant is opened
+# here (rclpy.init alone creates none), so this is safe outside a network namespace.
+"${VENV}/bin/python" - <<'EOF'
+import rclpy
+from rclpy.utilities import get_rmw_implementation_identifier
+from sensor_msgs.msg import JointState  # noqa: F401
+from std_msgs.msg import Float64MultiArray  # noqa: F401
+from std_srvs.srv import Trigger  # noqa: F401
+from rosgraph_msgs.msg import Clock  # noqa: F401
+from diagnostic_msgs.msg import DiagnosticArray  # noqa: F401
+from geometry_msgs.msg import PoseStamped  # noqa: F401
+import pytest  # noqa: F401
+rmw = get_rmw_implementation_identifier()
+assert rmw == "rmw_fastrtps_cpp", rmw
+EOF
+
+printf '%s\n' "${WANT}" >"${STAMP}"
+log "done: ${VENV} (Python ${PY_VERSION}); run rclpy code as: scripts/isolated ${VENV#"${REPO_ROOT}"/}/bin/python ..."

@@ -1,0 +1,127 @@
+"""Fixtures of the ROS 2 integration tests: the so101_sim_node process and an rclpy probe node.
+
+These tests talk to a live DDS graph, so they must run inside a private network namespace with
+only loopback (DDS discovery multicasts on every interface):
+
+    scripts/setup_python.sh
+    SO101_BIN_DIR=$HOME/.cache/so101/target/release \\
+        scripts/isolated .venv/bin/python -m pytest tests/integration
+
+(scripts/test_integration.sh does exactly this.) The conftest refuses to run (pytest.exit) anywhere
+else. Every pytest run gets its own namespace, so no ROS_DOMAIN_ID juggling is needed; the tests run
+one after the other and each starts its own node(s). A missing node binary FAILS the tests (it never
+skips them).
+"""
+
+from __future__ import annotations
+
+import os
+import sys
+from pathlib import Path
+
+import pytest
+
+HERE = Path(__file__).resolve().parent
+if str(HERE) not in sys.path:
+    sys.path.insert(0, str(HERE))
+
+from harness import (  # noqa: E402
+    REPO_ROOT,
+    Probe,
+    SimNode,
+    describe_returncode,
+    network_namespace_problem,
+    node_binary,
+)
+
+# Fast DDS profile (large socket buffers) and RMW for every rclpy participant of the run; set before
+# rclpy creates any context.
+os.environ.setdefault("RMW_IMPLEMENTATION", "rmw_fastrtps_cpp")
+os.environ.setdefault("FASTRTPS_DEFAULT_PROFILES_FILE", str(REPO_ROOT / "scripts" / "fastdds_profile.xml"))
+
+
+def pytest_configure(config: pytest.Config) -> None:
+    # Noise from the ROS wheels' dependencies (lark-parser imports sre_parse).
+    config.addinivalue_line("filterwarnings", "ignore:module 'sre_:DeprecationWarning")
+
+
+# =========================================================================== namespace guard
+def _refuse_outside_namespace() -> None:
+    problem = network_namespace_problem()
+    if problem:
+        pytest.exit(
+            "REFUSING to run the ROS 2 integration tests: " + problem + ".\n"
+            "They open DDS participants, whose discovery multicast must not leave this machine. Run them as\n"
+            "    scripts/isolated .venv/bin/python -m pytest tests/integration\n"
+            "(or scripts/test_integration.sh).",
+            returncode=3,
+        )
+
+
+@pytest.hookimpl(trylast=True)
+def pytest_collection_finish(session: pytest.Session) -> None:
+    """Refuse the whole run as soon as any test of this directory is selected (also --collect-only)."""
+    if any(Path(str(item.path)).resolve().is_relative_to(HERE) for item in session.items):
+        _refuse_outside_namespace()
+
+
+# =========================================================================== the node process
+@pytest.fixture
+def sim_factory(request: pytest.FixtureRequest, tmp_path: Path):
+    """start(*args, lite=True) -> SimNode: starts $SO101_BIN_DIR/so101_sim_node with the given flags
+    (`--lite` added unless lite=False). At teardown every node still running gets SIGINT and must
+    exit with return code 0; a node that died during the test fails it too."""
+    binary: list[Path] = []
+    nodes: list[SimNode] = []
+    request.node._so101_sim_nodes = nodes  # shown by pytest_runtest_makereport on failure
+
+    def start(*args: str, lite: bool = True) -> SimNode:
+        if not binary:
+            binary.append(node_binary())
+        argv = [str(a) for a in args]
+        if lite and "--lite" not in argv:
+            argv.insert(0, "--lite")
+        node = SimNode(binary[0], argv, tmp_path / f"so101_sim_node.{len(nodes)}.log")
+        nodes.append(node)
+        return node
+
+    yield start
+
+    problems = []
+    for node in nodes:
+        was_running = node.alive()
+        code = node.stop()
+        if code != 0:
+            how = "after SIGINT" if was_running else "by itself during the test (crash or early exit)"
+            problems.append(f"{node.describe()} ended {how} with {describe_returncode(code)}; its output:\n{node.log_tail()}")
+    if problems:
+        pytest.fail("\n\n".join(problems), pytrace=False)
+
+
+@pytest.hookimpl(wrapper=True)
+def pytest_runtest_makereport(item: pytest.Item, call: pytest.CallInfo):
+    """Attach the output of every node of a failed test to its report."""
+    report = yield
+    if report.failed:
+        for index, node in enumerate(getattr(item, "_so101_sim_nodes", [])):
+            report.sections.append((f"so101_sim_node #{index} output ({report.when}): {node.describe()}", node.log_tail(20000)))
+    return report
+
+
+# =========================================================================== rclpy
+@pytest.fixture
+def ros():
+    """A fresh rclpy context (its own DDS participant, so no graph state leaks between tests) and
+    a probe node spinning in a background thread."""
+    _refuse_outside_namespace()  # belt and braces: never open a participant outside the namespace
+    import rclpy
+    from rclpy.context import Context
+
+    context = Context()
+    rclpy.init(context=context)
+    probe = Probe(context, "so101_test_probe")
+    try:
+        yield probe
+    finally:
+        probe.close()
+        rclpy.try_shutdown(context=context)

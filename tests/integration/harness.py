@@ -1,0 +1,458 @@
+"""Building blocks of the ROS 2 integration tests (imported by conftest.py and the tests).
+
+Constants of the topic contract (docs/sim_node_interface.md), the network-namespace guard, the
+so101_sim_node process wrapper, and an rclpy probe node spinning in a background thread.
+"""
+
+from __future__ import annotations
+
+import fcntl
+import math
+import os
+import shlex
+import signal
+import socket
+import struct
+import subprocess
+import sys
+import threading
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Callable
+
+import pytest
+
+REPO_ROOT = Path(__file__).resolve().parents[2]
+NODE_NAME = "so101_sim_node"
+
+JOINT_NAMES = ["shoulder_pan", "shoulder_lift", "elbow_flex", "wrist_flex", "wrist_roll", "gripper"]
+JOINT_LIMITS = {
+    "shoulder_pan": (-1.9199, 1.9199),
+    "shoulder_lift": (-1.7453, 1.7453),
+    "elbow_flex": (-1.69, 1.69),
+    "wrist_flex": (-1.6581, 1.6581),
+    "wrist_roll": (-2.7438, 2.8412),
+    "gripper": (-0.1745, 1.7453),
+}
+# MuJoCo joint limits are soft constraints: a joint driven onto its limit may sit a hair beyond it.
+LIMIT_TOLERANCE = 0.02  # rad
+
+# Topics and services of the node, relative to its namespace, with their ROS type names.
+PUBLISHED_TOPICS = {
+    "joint_states": "sensor_msgs/msg/JointState",
+    "clock": "rosgraph_msgs/msg/Clock",
+    "task/reward": "std_msgs/msg/Float64",
+    "task/success": "std_msgs/msg/Bool",
+    "cube/pose": "geometry_msgs/msg/PoseStamped",
+    "diagnostics": "diagnostic_msgs/msg/DiagnosticArray",
+}
+SUBSCRIBED_TOPICS = {
+    "joint_commands": "sensor_msgs/msg/JointState",
+    "forward_position_controller/commands": "std_msgs/msg/Float64MultiArray",
+}
+SERVICES = {
+    "sim/reset": "std_srvs/srv/Trigger",
+    "sim/step": "std_srvs/srv/Trigger",
+}
+DIAGNOSTICS_STATUS_NAME = "so101_sim_node: commands"
+
+
+# =========================================================================== namespace guard
+_SIOCGIFFLAGS = 0x8913
+_IFF_UP = 0x1
+_IFF_MULTICAST = 0x1000
+
+
+def network_namespace_problem() -> str | None:
+    """Why DDS must not be used from this process, or None when it is inside a private network
+    namespace with only loopback, lo up, multicast-capable, and multicast routed on lo.
+
+    Everything is read from the process's own network namespace (/proc/self/net, an ioctl on a
+    socket); /sys/class/net would show the host's interfaces even inside a namespace.
+    """
+    try:
+        with open("/proc/self/net/dev", encoding="ascii") as f:
+            ifaces = sorted(line.split(":", 1)[0].strip() for line in f.readlines()[2:] if ":" in line)
+    except OSError as error:
+        return f"cannot read /proc/self/net/dev ({error})"
+    if ifaces != ["lo"]:
+        return f"this process sees the network interfaces {ifaces}, not only 'lo': it is not inside a private network namespace"
+    try:
+        with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+            raw = fcntl.ioctl(s.fileno(), _SIOCGIFFLAGS, struct.pack("16sh", b"lo", 0))
+        flags = struct.unpack("16sh", raw[:18])[1]
+    except OSError as error:
+        return f"cannot read the flags of lo ({error})"
+    if not flags & _IFF_UP:
+        return "lo is down in this namespace (ip link set lo up)"
+    if not flags & _IFF_MULTICAST:
+        return "lo has multicast off (ip link set lo multicast on)"
+    try:
+        with open("/proc/self/net/route", encoding="ascii") as f:
+            routes = [line.split() for line in f.readlines()[1:]]
+    except OSError as error:
+        return f"cannot read /proc/self/net/route ({error})"
+    # 224.0.0.0/4 in the little-endian hex of /proc/net/route.
+    if not any(r[0] == "lo" and r[1] == "000000E0" and r[7] == "000000F0" for r in routes if len(r) >= 8):
+        return "no multicast route on lo (ip route add 224.0.0.0/4 dev lo): DDS discovery would fail"
+    return None
+
+
+# =========================================================================== the node process
+def node_binary() -> Path:
+    """Path of so101_sim_node from $SO101_BIN_DIR; fails the test (never skips) when missing."""
+    bin_dir = os.environ.get("SO101_BIN_DIR")
+    default = "${CARGO_TARGET_DIR:-$HOME/.cache/so101/target}/release"
+    if not bin_dir:
+        pytest.fail(
+            f"SO101_BIN_DIR is not set: it must name the directory holding the built {NODE_NAME} "
+            f"(cargo build --release puts it in {default}).",
+            pytrace=False,
+        )
+    binary = Path(bin_dir) / NODE_NAME
+    if not binary.is_file():
+        pytest.fail(f"{NODE_NAME} binary not found at {binary} (SO101_BIN_DIR={bin_dir}); build it first.", pytrace=False)
+    if not os.access(binary, os.X_OK):
+        pytest.fail(f"{binary} is not executable.", pytrace=False)
+    return binary
+
+
+def node_environment() -> dict[str, str]:
+    """The test's environment minus what the venv's ROS-wheel bootstrapper added for Python.
+
+    ros-wheels-bootstrapper re-executes the venv's Python with LD_LIBRARY_PATH pointing into the
+    venv (ROS and Fast DDS libraries); the Rust node must not load libraries from there.
+    """
+    env = dict(os.environ)
+    prefix = os.path.realpath(sys.prefix) + os.sep
+    kept = [p for p in env.get("LD_LIBRARY_PATH", "").split(os.pathsep) if p and not (os.path.realpath(p) + os.sep).startswith(prefix)]
+    if kept:
+        env["LD_LIBRARY_PATH"] = os.pathsep.join(kept)
+    else:
+        env.pop("LD_LIBRARY_PATH", None)
+    env.pop("_ROS_WHEELS_BOOTSTRAP_COMPLETE", None)
+    env.setdefault("RUST_BACKTRACE", "1")
+    return env
+
+
+class SimNode:
+    """One running so101_sim_node; stdout+stderr go to a log file shown when a test fails."""
+
+    def __init__(self, binary: Path, args: list[str], log_path: Path):
+        self.args = list(args)
+        self.command = [str(binary), *self.args]
+        self.log_path = log_path
+        self.namespace = ""
+        if "--namespace" in self.args:
+            self.namespace = "/" + self.args[self.args.index("--namespace") + 1].strip("/")
+        self._log = open(log_path, "wb")
+        self.proc = subprocess.Popen(
+            self.command,
+            cwd=REPO_ROOT,
+            env=node_environment(),
+            stdin=subprocess.DEVNULL,
+            stdout=self._log,
+            stderr=subprocess.STDOUT,
+        )
+        self.started_at = time.monotonic()
+        self._stopped = False
+        self._stop_result: int | None = None
+
+    def name(self, relative: str) -> str:
+        """Absolute name of a topic/service of this node (with its --namespace)."""
+        return f"{self.namespace}/{relative.lstrip('/')}"
+
+    def log(self) -> str:
+        try:
+            return self.log_path.read_text(errors="replace")
+        except OSError as error:
+            return f"<cannot read {self.log_path}: {error}>"
+
+    def log_tail(self, chars: int = 6000) -> str:
+        text = self.log() or "<no output>"
+        return text if len(text) <= chars else "...\n" + text[-chars:]
+
+    def describe(self) -> str:
+        return f"`{shlex.join(self.command)}`"
+
+    def alive(self) -> bool:
+        return self.proc.poll() is None
+
+    def assert_alive(self) -> None:
+        code = self.proc.poll()
+        if code is not None:
+            pytest.fail(
+                f"{self.describe()} exited with {describe_returncode(code)}; its output:\n{self.log_tail()}", pytrace=False
+            )
+
+    def stop(self, timeout: float = 10.0) -> int | None:
+        """SIGINT, then wait; SIGKILL after `timeout`. Returns the return code, or None when it had
+        to be killed. Idempotent."""
+        if not self._stopped:
+            self._stopped = True
+            if self.proc.poll() is None:
+                self.proc.send_signal(signal.SIGINT)
+                try:
+                    self.proc.wait(timeout=timeout)
+                except subprocess.TimeoutExpired:
+                    self.proc.kill()
+                    self.proc.wait()
+                    self._log.close()
+                    return None
+            self._stop_result = self.proc.returncode
+            self._log.close()
+        return self._stop_result
+
+
+def describe_returncode(code: int | None) -> str:
+    if code is None:
+        return "no exit (killed after not stopping on SIGINT)"
+    if code < 0:
+        try:
+            return f"signal {signal.Signals(-code).name}"
+        except ValueError:
+            return f"signal {-code}"
+    return f"return code {code}"
+
+
+# =========================================================================== rclpy probe
+class Inbox:
+    """Messages of one subscription, with their local arrival times (time.monotonic)."""
+
+    def __init__(self, topic: str):
+        self.topic = topic
+        self._cond = threading.Condition()
+        self._items: list[tuple[float, Any]] = []
+
+    def _push(self, msg: Any) -> None:
+        now = time.monotonic()
+        with self._cond:
+            self._items.append((now, msg))
+            self._cond.notify_all()
+
+    def items(self) -> list[tuple[float, Any]]:
+        with self._cond:
+            return list(self._items)
+
+    def messages(self) -> list[Any]:
+        return [m for _, m in self.items()]
+
+    def count(self) -> int:
+        with self._cond:
+            return len(self._items)
+
+    def latest(self) -> Any | None:
+        with self._cond:
+            return self._items[-1][1] if self._items else None
+
+    def clear(self) -> None:
+        with self._cond:
+            self._items.clear()
+
+    def wait_for(self, predicate: Callable[[list[Any]], bool], timeout: float, what: str, sim: SimNode | None = None) -> list[Any]:
+        """Wait until predicate(messages) holds; fails the test with `what` on timeout (or node death)."""
+        deadline = time.monotonic() + timeout
+        with self._cond:
+            while True:
+                msgs = [m for _, m in self._items]
+                if predicate(msgs):
+                    return msgs
+                if sim is not None and not sim.alive():
+                    break
+                remaining = deadline - time.monotonic()
+                if remaining <= 0:
+                    break
+                self._cond.wait(min(remaining, 0.1))
+        if sim is not None:
+            sim.assert_alive()
+        pytest.fail(f"timeout after {timeout:.1f} s on {self.topic}: {what} (received {len(msgs)} messages)", pytrace=False)
+
+    def wait_count(self, n: int, timeout: float, sim: SimNode | None = None) -> list[Any]:
+        return self.wait_for(lambda msgs: len(msgs) >= n, timeout, f"waiting for {n} messages", sim)
+
+    def next_message(self, timeout: float, sim: SimNode | None = None) -> Any:
+        start = self.count()
+        return self.wait_for(lambda msgs: len(msgs) > start, timeout, "waiting for a new message", sim)[-1]
+
+
+def reliable_qos(depth: int = 10):
+    from rclpy.qos import QoSProfile, ReliabilityPolicy, DurabilityPolicy, HistoryPolicy
+
+    return QoSProfile(
+        depth=depth, history=HistoryPolicy.KEEP_LAST, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.VOLATILE
+    )
+
+
+def best_effort_qos(depth: int = 100):
+    """Matches a writer of any reliability (used where the contract does not fix the QoS)."""
+    from rclpy.qos import QoSProfile, ReliabilityPolicy, DurabilityPolicy, HistoryPolicy
+
+    return QoSProfile(
+        depth=depth, history=HistoryPolicy.KEEP_LAST, reliability=ReliabilityPolicy.BEST_EFFORT, durability=DurabilityPolicy.VOLATILE
+    )
+
+
+class Probe:
+    """An rclpy node spinning in a background thread, with helpers for the tests."""
+
+    def __init__(self, context, name: str):
+        import rclpy
+        from rclpy.executors import SingleThreadedExecutor
+
+        self.context = context
+        self.node = rclpy.create_node(name, context=context, start_parameter_services=False)
+        self.executor = SingleThreadedExecutor(context=context)
+        self.executor.add_node(self.node)
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._spin, name=f"spin-{name}", daemon=True)
+        self._thread.start()
+
+    def _spin(self) -> None:
+        while not self._stop.is_set() and self.context.ok():
+            try:
+                self.executor.spin_once(timeout_sec=0.05)
+            except Exception:  # noqa: BLE001 - context shutting down
+                if self._stop.is_set() or not self.context.ok():
+                    return
+                raise
+
+    def close(self) -> None:
+        self._stop.set()
+        self._thread.join(timeout=5)
+        self.executor.shutdown(timeout_sec=2)
+        self.node.destroy_node()
+
+    # ---- topics
+    def subscribe(self, topic: str, msg_type, qos=None) -> Inbox:
+        inbox = Inbox(topic)
+        self.node.create_subscription(msg_type, topic, inbox._push, qos if qos is not None else reliable_qos())
+        return inbox
+
+    def publisher(self, topic: str, msg_type, qos=None, wait_for_subscriber: float | None = 10.0, sim: SimNode | None = None):
+        pub = self.node.create_publisher(msg_type, topic, qos if qos is not None else reliable_qos())
+        if wait_for_subscriber:
+            wait_until(lambda: pub.get_subscription_count() >= 1, wait_for_subscriber, f"a subscriber of {topic}", sim)
+        return pub
+
+    # ---- services
+    def call(self, srv_type, name: str, request=None, timeout: float = 10.0, sim: SimNode | None = None):
+        client = self.node.create_client(srv_type, name)
+        try:
+            wait_until(client.service_is_ready, timeout, f"service {name}", sim)
+            future = client.call_async(request if request is not None else srv_type.Request())
+            wait_until(future.done, timeout, f"the response of {name}", sim)
+            if future.exception() is not None:
+                raise future.exception()
+            return future.result()
+        finally:
+            self.node.destroy_client(client)
+
+    # ---- graph
+    def topics(self) -> dict[str, list[str]]:
+        return dict(self.node.get_topic_names_and_types())
+
+    def services(self) -> dict[str, list[str]]:
+        return dict(self.node.get_service_names_and_types())
+
+
+def wait_until(predicate: Callable[[], bool], timeout: float, what: str, sim: SimNode | None = None, period: float = 0.02) -> None:
+    """Poll predicate; fail the test naming `what` on timeout, or at once if the node died."""
+    deadline = time.monotonic() + timeout
+    while True:
+        if predicate():
+            return
+        if sim is not None:
+            sim.assert_alive()
+        if time.monotonic() >= deadline:
+            pytest.fail(f"timeout after {timeout:.1f} s waiting for {what}", pytrace=False)
+        time.sleep(period)
+
+
+# =========================================================================== message helpers
+def stamp_seconds(stamp) -> float:
+    return stamp.sec + stamp.nanosec * 1e-9
+
+
+def stamp_nanoseconds(stamp) -> int:
+    return stamp.sec * 1_000_000_000 + stamp.nanosec
+
+
+def positions_by_name(msg) -> dict[str, float]:
+    return dict(zip(msg.name, msg.position))
+
+
+def limit_violations(msg, tolerance: float = LIMIT_TOLERANCE) -> list[str]:
+    """Joints of a JointState that are non-finite or outside their limits (+ tolerance)."""
+    problems = []
+    for name, value in zip(msg.name, msg.position):
+        low, high = JOINT_LIMITS.get(name, (-math.inf, math.inf))
+        if not math.isfinite(value) or value < low - tolerance or value > high + tolerance:
+            problems.append(f"{name}={value!r} (limits {low}..{high})")
+    return problems
+
+
+def max_error(msg, target: dict[str, float]) -> float:
+    actual = positions_by_name(msg)
+    return max(abs(actual[name] - value) for name, value in target.items())
+
+
+@dataclass
+class Running:
+    """A started node and the inbox of its joint_states (see start_and_wait)."""
+
+    sim: SimNode
+    joint_states: Inbox
+
+    def current_positions(self, timeout: float = 5.0) -> dict[str, float]:
+        return positions_by_name(self.joint_states.next_message(timeout, self.sim))
+
+
+def start_and_wait(sim_factory, ros: Probe, *args: str, timeout: float = 30.0) -> Running:
+    """Start a node with `args`, subscribe its joint_states and wait for the first message."""
+    from sensor_msgs.msg import JointState
+
+    sim = sim_factory(*args)
+    # Reliable like the node's writer; a deep reader cache so a briefly busy test process loses nothing.
+    inbox = ros.subscribe(sim.name("joint_states"), JointState, reliable_qos(depth=100))
+    inbox.wait_count(1, timeout, sim)
+    return Running(sim=sim, joint_states=inbox)
+
+
+def offset_pose(start: dict[str, float], delta: float, margin: float = 0.15) -> dict[str, float]:
+    """`start` moved by `delta` rad on every joint, towards the middle of each joint's range (away
+    from the nearer limit, so a rest pose folded onto a limit unfolds), kept `margin` inside."""
+    target = {}
+    for name in JOINT_NAMES:
+        low, high = JOINT_LIMITS[name]
+        value = start[name]
+        step = delta if value <= 0.5 * (low + high) else -delta
+        target[name] = min(max(value + step, low + margin), high - margin)
+    return target
+
+
+def wait_reached(running: Running, target: dict[str, float], tolerance: float = 0.05, timeout: float = 6.0, settled: int = 20):
+    """Wait until `settled` consecutive joint_states are all within `tolerance` of `target` (rad)."""
+    seen: list = []
+
+    def predicate(msgs: list) -> bool:
+        seen[:] = msgs[-1:]
+        tail = msgs[-settled:]
+        return len(tail) == settled and all(max_error(m, target) <= tolerance for m in tail)
+
+    start = running.joint_states.count()
+    try:
+        return running.joint_states.wait_for(
+            lambda msgs: predicate(msgs[start:]), timeout, f"the arm to settle within {tolerance} rad of {target}", running.sim
+        )
+    except pytest.fail.Exception as failure:
+        last = positions_by_name(seen[0]) if seen else None
+        raise pytest.fail.Exception(f"{failure}; last joint_states positions: {last}", pytrace=False) from None
+
+
+def diagnostics_values(array_msg, status_name: str = DIAGNOSTICS_STATUS_NAME) -> dict[str, str] | None:
+    """key -> value of the named status in a DiagnosticArray, or None when it is not there."""
+    for status in array_msg.status:
+        if status.name == status_name:
+            return {kv.key: kv.value for kv in status.values}
+    return None
