@@ -26,7 +26,7 @@ def arrival_rate(items: list[tuple[float, object]]) -> float:
     return (len(times) - 1) / (times[-1] - times[0])
 
 
-@pytest.mark.parametrize("rate", [100, 50])
+@pytest.mark.parametrize("rate", [100, 50, 30])
 def test_joint_states_arrive_at_the_configured_rate(sim_factory, ros, rate):
     running = start_and_wait(sim_factory, ros, "--rate", str(rate))
     running.joint_states.wait_count(5, 5.0, running.sim)  # past start-up

@@ -6,6 +6,7 @@ use so101_core::robot::{JointLimit, JointPositions, JOINT_COUNT, JOINT_NAMES};
 
 use crate::{
     mujoco::{MujocoError, ObjectKind, Simulation},
+    pacing::steps_in_period,
     placement::CubeStart,
     task::{OrientedBox, TaskObservation},
 };
@@ -59,11 +60,17 @@ pub struct World {
     ids: SceneIds,
     limits: [JointLimit; JOINT_COUNT],
     targets: JointPositions,
-    steps_per_period: usize,
+    timestep: f64,
+    control_period: f64,
     cube_rest_height: f64,
     /// Sim time at which the current episode started: MuJoCo restarts its clock at every reset,
     /// but /clock must never go backwards.
     episode_start_time: f64,
+    /// Control periods and physics steps done in this episode. Time is counted in steps rather than
+    /// summed by MuJoCo, so stamps do not drift by rounding.
+    episode_periods: u64,
+    episode_steps: u64,
+    total_steps: u64,
 }
 
 fn require(sim: &Simulation, kind: ObjectKind, name: &str) -> Result<usize, WorldError> {
@@ -77,8 +84,7 @@ impl World {
     /// Binds the scene: every joint, actuator, site and body the node uses must exist by name.
     pub fn new(sim: Simulation, control_period: f64) -> Result<Self, WorldError> {
         let timestep = sim.timestep();
-        let ratio = control_period / timestep;
-        if ratio < 0.5 || (ratio - ratio.round()).abs() > 1e-6 {
+        if control_period.is_nan() || control_period < timestep {
             return Err(WorldError::Period {
                 period: control_period,
                 timestep,
@@ -118,9 +124,13 @@ impl World {
             ids,
             limits,
             targets: [0.0; JOINT_COUNT],
-            steps_per_period: ratio.round() as usize,
+            timestep,
+            control_period,
             cube_rest_height,
             episode_start_time: 0.0,
+            episode_periods: 0,
+            episode_steps: 0,
+            total_steps: 0,
         };
         world.reset(None);
         Ok(world)
@@ -137,17 +147,24 @@ impl World {
 
     /// Sim time since the world was created (monotonic across episodes).
     pub fn time(&self) -> f64 {
-        self.episode_start_time + self.sim.time()
+        self.episode_start_time + self.episode_steps as f64 * self.timestep
     }
 
-    pub fn steps_per_period(&self) -> usize {
-        self.steps_per_period
+    pub fn timestep(&self) -> f64 {
+        self.timestep
+    }
+
+    /// Physics steps since the world was created.
+    pub fn total_steps(&self) -> u64 {
+        self.total_steps
     }
 
     /// Starts a new episode: arm at home (all joints 0) and holding there, the cube at `cube` (or
     /// where the scene puts it). Sim time goes on from where the last episode ended.
     pub fn reset(&mut self, cube: Option<CubeStart>) {
-        self.episode_start_time += self.sim.time();
+        self.episode_start_time = self.time();
+        self.episode_periods = 0;
+        self.episode_steps = 0;
         self.sim.reset();
         self.targets = [0.0; JOINT_COUNT];
         if let Some(start) = cube {
@@ -169,9 +186,13 @@ impl World {
     pub fn advance(&mut self) -> bool {
         self.write_controls();
         let warnings_before = self.sim.warning_count();
-        for _ in 0..self.steps_per_period {
+        let steps = steps_in_period(self.episode_periods, self.control_period, self.timestep);
+        for _ in 0..steps {
             self.sim.step();
         }
+        self.episode_periods += 1;
+        self.episode_steps += steps;
+        self.total_steps += steps;
         self.sim.warning_count() == warnings_before
     }
 

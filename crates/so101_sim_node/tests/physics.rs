@@ -33,7 +33,7 @@ fn scene_limits_match_the_robot_model() {
     for (scene, model) in world.limits().iter().zip(JOINT_LIMITS) {
         assert!((scene.min - model.min).abs() < 1e-3 && (scene.max - model.max).abs() < 1e-3);
     }
-    assert_eq!(world.steps_per_period(), 5);
+    assert_eq!(world.timestep(), 0.002);
 }
 
 #[test]

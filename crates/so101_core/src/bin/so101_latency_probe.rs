@@ -24,6 +24,10 @@ struct Args {
     /// Round trips done first and not counted (discovery, caches).
     #[arg(long, default_value_t = 50)]
     warmup: usize,
+    /// Pause before each command, spread evenly over 0..JITTER seconds, so commands land at every
+    /// phase of the node's control period instead of locking onto it.
+    #[arg(long, default_value_t = 0.01)]
+    jitter: f64,
     /// Seconds to wait for the node's /joint_states before giving up.
     #[arg(long, default_value_t = 20.0)]
     discovery_timeout: f64,
@@ -53,6 +57,9 @@ fn main() -> Result<()> {
 
     let mut latencies = Vec::with_capacity(args.samples);
     for round in 0..args.warmup + args.samples {
+        // Golden-ratio sequence: evenly spread pauses without a random generator.
+        let phase = (round as f64 * 0.618_033_988_75).fract();
+        std::thread::sleep(Duration::from_secs_f64(args.jitter.max(0.0) * phase));
         while states.take()?.is_some() {}
         let command = JointState {
             name: vec![JOINT_NAMES[5].to_owned()],

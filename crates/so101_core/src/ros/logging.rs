@@ -1,7 +1,7 @@
 //! Logging: `tracing` to stderr, and the stack's own events mirrored to /rosout once a node exists,
 //! so `ros2 topic echo /rosout` and rqt_console show what a node says.
 
-use std::sync::OnceLock;
+use std::{io::IsTerminal, sync::OnceLock};
 
 use ros2_client::{
     log::LogLevel,
@@ -23,6 +23,7 @@ pub fn init() {
         .with(
             tracing_subscriber::fmt::layer()
                 .with_writer(std::io::stderr)
+                .with_ansi(std::io::stderr().is_terminal())
                 .with_filter(filter),
         )
         .with(RosoutLayer.with_filter(tracing_subscriber::filter::LevelFilter::INFO))
