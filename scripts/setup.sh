@@ -10,7 +10,7 @@ set -euo pipefail
 
 REPO_ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 export CARGO_TARGET_DIR="${CARGO_TARGET_DIR:-${HOME}/.cache/so101/target}"
-APT_PACKAGES=(libmujoco-dev libmujoco-samples libclang-dev clang iproute2 util-linux python3-venv)
+APT_PACKAGES=(libmujoco-dev libmujoco-samples libclang-dev iproute2 util-linux python3-venv)
 
 log() { printf '\033[1msetup:\033[0m %s\n' "$*" >&2; }
 die() { printf 'setup: ERROR: %s\n' "$*" >&2; exit 1; }

@@ -456,3 +456,12 @@ def diagnostics_values(array_msg, status_name: str = DIAGNOSTICS_STATUS_NAME) ->
         if status.name == status_name:
             return {kv.key: kv.value for kv in status.values}
     return None
+
+
+def latest_diagnostics_values(array_msgs) -> dict[str, str] | None:
+    """key -> value of the node's status in the newest DiagnosticArray that has it, or None."""
+    for msg in reversed(array_msgs):
+        values = diagnostics_values(msg)
+        if values is not None:
+            return values
+    return None

@@ -12,7 +12,7 @@ from harness import (
     JOINT_LIMITS,
     JOINT_NAMES,
     best_effort_qos,
-    diagnostics_values,
+    latest_diagnostics_values,
     limit_violations,
     positions_by_name,
     stamp_seconds,
@@ -118,15 +118,8 @@ def test_flood_of_bad_commands(sim_factory, ros):
     assert abs(final["shoulder_pan"] - MARK) > 0.1, f"an invalid command moved shoulder_pan to {final['shoulder_pan']}"
 
     # /diagnostics counts them.
-    def counters(msgs):
-        for msg in reversed(msgs):
-            values = diagnostics_values(msg)
-            if values is not None:
-                return values
-        return None
-
     diagnostics.wait_for(
-        lambda msgs: (c := counters(msgs)) is not None
+        lambda msgs: (c := latest_diagnostics_values(msgs)) is not None
         and c.get("rejected_commands", "").isdigit()
         and int(c["rejected_commands"]) > 0
         and c.get("accepted_commands", "").isdigit()

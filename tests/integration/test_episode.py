@@ -12,7 +12,7 @@ import pytest
 from harness import (
     DIAGNOSTICS_STATUS_NAME,
     best_effort_qos,
-    diagnostics_values,
+    latest_diagnostics_values,
     stamp_nanoseconds,
     start_and_wait,
     wait_until,
@@ -191,20 +191,13 @@ def test_diagnostics_report_command_counters(sim_factory, ros):
     current = running.current_positions()
     pub.publish(JointState(name=["gripper"], position=[current["gripper"]]))
 
-    def counters(msgs):
-        for msg in reversed(msgs):
-            values = diagnostics_values(msg)
-            if values is not None:
-                return values
-        return None
-
     msgs = diagnostics.wait_for(
-        lambda msgs: (c := counters(msgs)) is not None and c.get("accepted_commands", "0").isdigit() and int(c["accepted_commands"]) >= 1,
+        lambda msgs: (c := latest_diagnostics_values(msgs)) is not None and c.get("accepted_commands", "0").isdigit() and int(c["accepted_commands"]) >= 1,
         5.0,
         f"a status {DIAGNOSTICS_STATUS_NAME!r} with accepted_commands >= 1",
         running.sim,
     )
-    values = counters(msgs)
+    values = latest_diagnostics_values(msgs)
     for key in ("accepted_commands", "rejected_commands"):
         assert key in values, f"{key} missing from {values}"
         assert values[key].isdigit(), f"{key}={values[key]!r} is not a decimal integer"

@@ -67,15 +67,20 @@ pub fn targets_from_joint_state(
         if result.targets[joint].is_some() {
             return Err(CommandError::DuplicateJoint(name.clone()));
         }
-        if !value.is_finite() {
-            return Err(CommandError::NotFinite {
-                joint: JOINT_NAMES[joint],
-                value,
-            });
-        }
-        result.targets[joint] = Some(value);
+        result.targets[joint] = Some(finite(joint, value)?);
     }
     Ok(result)
+}
+
+fn finite(joint: usize, value: f64) -> Result<f64, CommandError> {
+    if value.is_finite() {
+        Ok(value)
+    } else {
+        Err(CommandError::NotFinite {
+            joint: JOINT_NAMES[joint],
+            value,
+        })
+    }
 }
 
 /// Validates a std_msgs/Float64MultiArray command: exactly one position per joint, in joint order.
@@ -85,13 +90,7 @@ pub fn targets_from_array(values: &[f64]) -> Result<PartialTargets, CommandError
     }
     let mut result = PartialTargets::default();
     for (joint, &value) in values.iter().enumerate() {
-        if !value.is_finite() {
-            return Err(CommandError::NotFinite {
-                joint: JOINT_NAMES[joint],
-                value,
-            });
-        }
-        result.targets[joint] = Some(value);
+        result.targets[joint] = Some(finite(joint, value)?);
     }
     Ok(result)
 }

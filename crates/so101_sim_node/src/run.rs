@@ -15,7 +15,7 @@ use crate::{
     mujoco,
     pacing::{Pacer, TimeMode},
     placement::{CubePlacer, SpawnArea},
-    ros_io::{CommandInbox, Frame, FramePublisher, NodeDiagnostics, SimServices},
+    ros_io::{CommandInbox, Frame, FramePublisher, NodeDiagnostics, PendingCall, SimServices},
     scene, task,
     world::World,
 };
@@ -23,28 +23,30 @@ use crate::{
 /// Where /sim/reset may put the cube (world frame, m): every point was picked into the bin by a
 /// scripted grasp in this scene, and it stays at least 6.5 cm clear of the bin.
 pub const CUBE_SPAWN_AREA: SpawnArea = SpawnArea {
-    x: (0.15, 0.28),
-    y: (-0.08, 0.12),
+    x: (0.18, 0.28),
+    y: (-0.08, 0.08),
 };
 
 /// Seconds of sim time between two /diagnostics messages.
 const DIAGNOSTICS_PERIOD: f64 = 1.0;
 
-/// How often --speed max looks for commands and service calls (wall time).
+/// How often --speed max looks for commands and service calls (wall time): at over 10 kHz of
+/// control periods, polling every DDS reader each period costs more than the physics.
 const MAX_SPEED_INTAKE_PERIOD: Duration = Duration::from_micros(500);
 
 /// How often lockstep mode looks for /sim/step calls while idle.
 const LOCKSTEP_POLL: Duration = Duration::from_micros(100);
 
+/// Loads the scene, starts the node and runs the loop until a signal or `--duration`.
 pub fn run(args: Args) -> Result<()> {
+    let simulation = scene::load(&args.scene, args.lite)?;
+    let world =
+        World::new(simulation, 1.0 / args.rate).context("the scene does not fit the node")?;
     let time_mode = if args.lockstep {
         TimeMode::Lockstep
     } else {
         args.speed
     };
-    let simulation = scene::load(&args.scene, args.lite)?;
-    let mut world =
-        World::new(simulation, 1.0 / args.rate).context("the scene does not fit the node")?;
     tracing::info!(
         mujoco = %mujoco::version(),
         scene = %args.scene.display(),
@@ -55,19 +57,12 @@ pub fn run(args: Args) -> Result<()> {
         mode = ?time_mode,
         "simulation ready"
     );
-
     let shutdown = Shutdown::on_signals().context("cannot install the signal handlers")?;
     let mut node = RosNode::start("so101_sim_node", &args.node)?;
-    let mut publisher = FramePublisher::start(&mut node)?;
-    let mut inbox = CommandInbox::subscribe(&mut node)?;
+    let publisher = FramePublisher::start(&mut node)?;
+    let inbox = CommandInbox::subscribe(&mut node)?;
     let services = SimServices::serve(&mut node)?;
-
-    let mut placer = CubePlacer::new(CUBE_SPAWN_AREA, args.seed);
-    let mut demo = args.demo.then(|| Script::new(&PICK_AND_PLACE));
-    let mut demo_start = world.time();
-    let mut diagnostics = NodeDiagnostics::default();
-    let mut next_diagnostics = world.time();
-    let mut pacer = Pacer::new(
+    let pacer = Pacer::new(
         match time_mode {
             TimeMode::Scaled { speed } => Some(speed),
             TimeMode::Max | TimeMode::Lockstep => None,
@@ -75,145 +70,204 @@ pub fn run(args: Args) -> Result<()> {
         world.time(),
         Instant::now(),
     );
-    let deadline = args
-        .duration
-        .map(|seconds| Instant::now() + Duration::from_secs_f64(seconds.max(0.0)));
-
-    let loop_start = Instant::now();
-    let mut last_intake = loop_start - MAX_SPEED_INTAKE_PERIOD;
-    let sim_time_at_start = world.time();
-    let steps_at_start = world.total_steps();
-    // The state at time 0, so subscribers see the arm before the first step.
-    publisher.send(frame(&world, &args, None, None));
-    while !shutdown.is_requested() && deadline.is_none_or(|deadline| Instant::now() < deadline) {
-        // At --speed max the loop runs at over 10 kHz; polling every DDS reader on each period
-        // costs a few syscalls each, so it polls at MAX_SPEED_INTAKE_PERIOD of wall time instead.
-        let intake_due =
-            time_mode != TimeMode::Max || last_intake.elapsed() >= MAX_SPEED_INTAKE_PERIOD;
-        if intake_due {
-            last_intake = Instant::now();
-            let commands = inbox.drain();
-            if !commands.is_empty() && demo.take().is_some() {
-                tracing::info!("external command received: demo stopped");
-            }
-            let limits = *world.limits();
-            for targets in commands {
-                targets.apply_clamped(world.targets_mut(), &limits);
-            }
-            while let Some(call) = services.next_reset() {
-                let start = placer.next_start();
-                world.reset(Some(start));
-                diagnostics.episode += 1;
-                demo_start = world.time();
-                tracing::info!(
-                    episode = diagnostics.episode,
-                    x = start.x,
-                    y = start.y,
-                    yaw = start.yaw,
-                    "new episode"
-                );
-                let message = format!(
-                    "episode {} started: cube at x={:.4} y={:.4} yaw={:.4}",
-                    diagnostics.episode, start.x, start.y, start.yaw
-                );
-                services.answer_reset(call, true, message);
-                publisher.send(frame(&world, &args, None, None));
-            }
-        }
-        let steps_requested = match time_mode {
-            TimeMode::Lockstep => {
-                let mut calls = Vec::new();
-                while let Some(call) = services.next_step() {
-                    calls.push(call);
-                }
-                calls
-            }
-            _ if !intake_due => Vec::new(),
-            _ => {
-                while let Some(call) = services.next_step() {
-                    services.answer_step(
-                        call,
-                        false,
-                        "not in lockstep mode: start the node with --lockstep".into(),
-                    );
-                }
-                Vec::new()
-            }
-        };
-        if time_mode == TimeMode::Lockstep && steps_requested.is_empty() {
-            publisher.flush();
-            std::thread::sleep(LOCKSTEP_POLL);
-            continue;
-        }
-
-        let periods = steps_requested.len().max(1);
-        let mut calls = steps_requested.into_iter();
-        for _ in 0..periods {
-            let wait = pacer.wait_before(world.time() + 1.0 / args.rate, Instant::now());
-            if !wait.is_zero() {
-                // Nothing published may wait in a batch while the loop sleeps.
-                publisher.flush();
-                std::thread::sleep(wait);
-            }
-            if let Some(script) = &demo {
-                let elapsed = world.time() - demo_start;
-                if elapsed > script.duration() {
-                    world.reset(None);
-                    demo_start = world.time();
-                }
-                *world.targets_mut() = script.targets_at(world.time() - demo_start);
-            }
-            if !world.advance() {
-                diagnostics.mujoco_warnings += 1;
-                tracing::warn!("MuJoCo reported a numerical problem and reset the state");
-            }
-            let report = (world.time() + 1e-9 >= next_diagnostics).then(|| {
-                next_diagnostics = world.time() + DIAGNOSTICS_PERIOD;
-                diagnostics.accepted_commands = inbox.accepted;
-                diagnostics.rejected_commands = inbox.rejected;
-                diagnostics.pacing_resyncs = pacer.resyncs;
-                diagnostics.clone()
-            });
-            match calls.next() {
-                Some(call) => {
-                    // Answer /sim/step only once the new state is published.
-                    let (done, published) = sync_channel(1);
-                    publisher.send(frame(&world, &args, report, Some(done)));
-                    let _ = published.recv();
-                    services.answer_step(call, true, format!("t={:.6}", world.time()));
-                }
-                None => publisher.send(frame(&world, &args, report, None)),
-            }
-        }
-    }
-    let wall_seconds = loop_start.elapsed().as_secs_f64();
-    let physics_steps = world.total_steps() - steps_at_start;
-    tracing::info!(
-        sim_time = world.time(),
-        sim_seconds_run = world.time() - sim_time_at_start,
-        wall_seconds,
-        physics_steps,
-        steps_per_second = physics_steps as f64 / wall_seconds,
-        "shutting down"
-    );
-    drop(publisher);
+    let mut control = SimLoop {
+        placer: CubePlacer::new(CUBE_SPAWN_AREA, args.seed),
+        demo: args.demo.then(|| Script::new(&PICK_AND_PLACE)),
+        demo_start: world.time(),
+        next_diagnostics: world.time(),
+        diagnostics: NodeDiagnostics::default(),
+        args,
+        time_mode,
+        world,
+        publisher,
+        inbox,
+        services,
+        pacer,
+        _node: node,
+    };
+    control.run(&shutdown);
     Ok(())
 }
 
-fn frame(
-    world: &World,
-    args: &Args,
-    diagnostics: Option<NodeDiagnostics>,
-    published: Option<std::sync::mpsc::SyncSender<()>>,
-) -> Frame {
-    let outcome = task::evaluate(args.task, args.dense_reward, &world.task_observation());
-    Frame {
-        sim_time: world.time(),
-        arm: world.arm_state(),
-        reward: outcome.reward,
-        success: outcome.success,
-        cube: world.cube_pose(),
-        diagnostics,
-        published,
+struct SimLoop {
+    args: Args,
+    time_mode: TimeMode,
+    world: World,
+    publisher: FramePublisher,
+    inbox: CommandInbox,
+    services: SimServices,
+    pacer: Pacer,
+    placer: CubePlacer,
+    demo: Option<Script>,
+    demo_start: f64,
+    diagnostics: NodeDiagnostics,
+    next_diagnostics: f64,
+    // Declared last: dropped after the publishers and readers that belong to it.
+    _node: RosNode,
+}
+
+impl SimLoop {
+    fn run(&mut self, shutdown: &Shutdown) {
+        let deadline = self
+            .args
+            .duration
+            .map(|seconds| Instant::now() + Duration::from_secs_f64(seconds.max(0.0)));
+        let started = (Instant::now(), self.world.time(), self.world.total_steps());
+        let mut last_intake = started.0 - MAX_SPEED_INTAKE_PERIOD;
+        // The state at time 0, so subscribers see the arm before the first step.
+        self.publish(None);
+        while !shutdown.is_requested() && deadline.is_none_or(|deadline| Instant::now() < deadline)
+        {
+            let intake_due =
+                self.time_mode != TimeMode::Max || last_intake.elapsed() >= MAX_SPEED_INTAKE_PERIOD;
+            if intake_due {
+                last_intake = Instant::now();
+                self.apply_commands();
+                self.serve_resets();
+            }
+            if self.time_mode == TimeMode::Lockstep {
+                self.serve_steps();
+                continue;
+            }
+            if intake_due {
+                self.refuse_steps();
+            }
+            self.wait_for_wall_clock();
+            let report = self.advance_period();
+            self.publish(report);
+        }
+        self.publisher.flush();
+        let wall_seconds = started.0.elapsed().as_secs_f64();
+        let physics_steps = self.world.total_steps() - started.2;
+        tracing::info!(
+            sim_time = self.world.time(),
+            sim_seconds_run = self.world.time() - started.1,
+            wall_seconds,
+            physics_steps,
+            steps_per_second = physics_steps as f64 / wall_seconds,
+            "shutting down"
+        );
+    }
+
+    /// Valid commands become the new targets (clamped); the first one ends the demo.
+    fn apply_commands(&mut self) {
+        let commands = self.inbox.drain();
+        if !commands.is_empty() && self.demo.take().is_some() {
+            tracing::info!("external command received: demo stopped");
+        }
+        let limits = *self.world.limits();
+        for targets in commands {
+            targets.apply_clamped(self.world.targets_mut(), &limits);
+        }
+    }
+
+    fn serve_resets(&mut self) {
+        while let Some(call) = self.services.next_reset() {
+            let start = self.placer.next_start();
+            self.world.reset(Some(start));
+            self.diagnostics.episode += 1;
+            self.demo_start = self.world.time();
+            tracing::info!(
+                episode = self.diagnostics.episode,
+                x = start.x,
+                y = start.y,
+                yaw = start.yaw,
+                "new episode"
+            );
+            let message = format!(
+                "episode {} started: cube at x={:.4} y={:.4} yaw={:.4}",
+                self.diagnostics.episode, start.x, start.y, start.yaw
+            );
+            // The caller sees the new episode on the topics by the time it has the answer.
+            self.publish_and_wait(None);
+            self.services.answer_reset(call, true, message);
+        }
+    }
+
+    /// Lockstep: one control period per /sim/step call, answered once its state is published.
+    fn serve_steps(&mut self) {
+        let calls: Vec<PendingCall> = std::iter::from_fn(|| self.services.next_step()).collect();
+        if calls.is_empty() {
+            self.publisher.flush();
+            std::thread::sleep(LOCKSTEP_POLL);
+            return;
+        }
+        for call in calls {
+            let report = self.advance_period();
+            self.publish_and_wait(report);
+            let time = self.world.time();
+            self.services
+                .answer_step(call, true, format!("t={time:.6}"));
+        }
+    }
+
+    fn refuse_steps(&mut self) {
+        while let Some(call) = self.services.next_step() {
+            let reason = "not in lockstep mode: start the node with --lockstep";
+            self.services.answer_step(call, false, reason.into());
+        }
+    }
+
+    fn wait_for_wall_clock(&mut self) {
+        let period_end = self.world.time() + 1.0 / self.args.rate;
+        let wait = self.pacer.wait_before(period_end, Instant::now());
+        if !wait.is_zero() {
+            // Nothing published may wait in a batch while the loop sleeps.
+            self.publisher.flush();
+            std::thread::sleep(wait);
+        }
+    }
+
+    /// Runs the physics for one control period; returns the diagnostics when they are due.
+    fn advance_period(&mut self) -> Option<NodeDiagnostics> {
+        if let Some(script) = &self.demo {
+            if self.world.time() - self.demo_start > script.duration() {
+                self.world.reset(None);
+                self.demo_start = self.world.time();
+            }
+            *self.world.targets_mut() = script.targets_at(self.world.time() - self.demo_start);
+        }
+        if !self.world.advance() {
+            self.diagnostics.mujoco_warnings += 1;
+            tracing::warn!("MuJoCo reported a numerical problem and reset the state");
+        }
+        if self.world.time() + 1e-9 < self.next_diagnostics {
+            return None;
+        }
+        self.next_diagnostics = self.world.time() + DIAGNOSTICS_PERIOD;
+        self.diagnostics.accepted_commands = self.inbox.accepted;
+        self.diagnostics.rejected_commands = self.inbox.rejected;
+        self.diagnostics.pacing_resyncs = self.pacer.resyncs;
+        Some(self.diagnostics.clone())
+    }
+
+    fn publish(&mut self, diagnostics: Option<NodeDiagnostics>) {
+        let frame = self.frame(diagnostics, None);
+        self.publisher.send(frame);
+    }
+
+    fn publish_and_wait(&mut self, diagnostics: Option<NodeDiagnostics>) {
+        let (done, published) = sync_channel(1);
+        let frame = self.frame(diagnostics, Some(done));
+        self.publisher.send(frame);
+        let _ = published.recv();
+    }
+
+    fn frame(
+        &self,
+        diagnostics: Option<NodeDiagnostics>,
+        published: Option<std::sync::mpsc::SyncSender<()>>,
+    ) -> Frame {
+        let observation = self.world.task_observation();
+        let outcome = task::evaluate(self.args.task, self.args.dense_reward, &observation);
+        Frame {
+            sim_time: self.world.time(),
+            arm: self.world.arm_state(),
+            reward: outcome.reward,
+            success: outcome.success,
+            cube: self.world.cube_pose(),
+            diagnostics,
+            published,
+        }
     }
 }
