@@ -19,6 +19,10 @@ from sensor_msgs.msg import JointState
 from std_msgs.msg import Bool, Float64
 
 
+SHORT_NAMES = {"shoulder_pan": "pan", "shoulder_lift": "lift", "elbow_flex": "elbow",
+               "wrist_flex": "wrist", "wrist_roll": "roll", "gripper": "grip"}
+
+
 class Watcher(Node):
     def __init__(self):
         super().__init__("sim_watcher")
@@ -50,7 +54,7 @@ class Watcher(Node):
         if self.joints is None:
             return "waiting for /joint_states ..."
         stamp = self.joints.header.stamp.sec + self.joints.header.stamp.nanosec * 1e-9
-        joints = " ".join(f"{n[:6]}={p:+.2f}" for n, p in zip(self.joints.name, self.joints.position))
+        joints = " ".join(f"{SHORT_NAMES.get(n, n)}={p:+.2f}" for n, p in zip(self.joints.name, self.joints.position))
         cube = f"cube=({self.cube.x:.3f},{self.cube.y:.3f},{self.cube.z:.3f})" if self.cube else "cube=?"
         return (f"t={stamp:7.2f}s {joints} {cube} reward={self.reward if self.reward is not None else float('nan'):.2f}"
                 f" in_bin={self.success} drops_in_bin={self.successes}")
