@@ -58,6 +58,8 @@ pub fn default_scene() -> &'static str {
 fn parse_rate(text: &str) -> Result<f64, String> {
     match text.parse::<f64>() {
         Ok(rate) if rate.is_finite() && rate > 0.0 && rate <= 10_000.0 => Ok(rate),
-        _ => Err(format!("{text:?} is not a rate between 0 and 10000 Hz")),
+        _ => Err(format!(
+            "{text:?} is not a rate above 0 and at most 10000 Hz"
+        )),
     }
 }

@@ -18,7 +18,7 @@ pub enum WorldError {
     #[error("the scene has no {kind:?} named {name:?}, which the node needs")]
     Missing { kind: ObjectKind, name: String },
     #[error(
-        "the control period {period} s is not a whole number of physics steps of {timestep} s"
+        "the control period {period} s is shorter than a physics step ({timestep} s): lower --rate"
     )]
     Period { period: f64, timestep: f64 },
 }
