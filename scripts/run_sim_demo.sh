@@ -6,8 +6,8 @@
 #   scripts/run_sim_demo.sh [--duration SECONDS] [extra so101_sim_node flags, e.g. --lite]
 set -euo pipefail
 
-REPO_ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
-export CARGO_TARGET_DIR="${CARGO_TARGET_DIR:-${HOME}/.cache/so101/target}"
+. "$(dirname "${BASH_SOURCE[0]}")/common.sh"
+REPO_ROOT="${SO101_ROOT}"
 
 "${REPO_ROOT}/scripts/setup.sh"
 exec "${REPO_ROOT}/scripts/isolated" bash -c '

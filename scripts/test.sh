@@ -4,9 +4,9 @@
 # may open a DDS participant runs inside a private network namespace (scripts/isolated).
 set -euo pipefail
 
-REPO_ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
+. "$(dirname "${BASH_SOURCE[0]}")/common.sh"
+REPO_ROOT="${SO101_ROOT}"
 cd "${REPO_ROOT}"
-export CARGO_TARGET_DIR="${CARGO_TARGET_DIR:-${HOME}/.cache/so101/target}"
 
 log() { printf '\033[1mtest:\033[0m %s\n' "$*" >&2; }
 

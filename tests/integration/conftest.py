@@ -7,7 +7,7 @@ only loopback (DDS discovery multicasts on every interface):
     SO101_BIN_DIR=$HOME/.cache/so101/target/release \\
         scripts/isolated .venv/bin/python -m pytest tests/integration
 
-(scripts/test_integration.sh does exactly this.) The conftest refuses to run (pytest.exit) anywhere
+(scripts/test.sh does exactly this.) The conftest refuses to run (pytest.exit) anywhere
 else. Every pytest run gets its own namespace, so no ROS_DOMAIN_ID juggling is needed; the tests run
 one after the other and each starts its own node(s). A missing node binary FAILS the tests (it never
 skips them).
@@ -53,7 +53,7 @@ def _refuse_outside_namespace() -> None:
             "REFUSING to run the ROS 2 integration tests: " + problem + ".\n"
             "They open DDS participants, whose discovery multicast must not leave this machine. Run them as\n"
             "    scripts/isolated .venv/bin/python -m pytest tests/integration\n"
-            "(or scripts/test_integration.sh).",
+            "(or scripts/test.sh).",
             returncode=3,
         )
 

@@ -55,7 +55,7 @@ SERVICES = {
     "sim/reset": "std_srvs/srv/Trigger",
     "sim/step": "std_srvs/srv/Trigger",
 }
-DIAGNOSTICS_STATUS_NAME = "so101_sim_node: commands"
+DIAGNOSTICS_STATUS_NAME = "so101_sim_node"
 
 
 # =========================================================================== namespace guard

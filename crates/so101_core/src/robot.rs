@@ -36,10 +36,6 @@ impl JointLimit {
     pub fn contains(&self, value: f64) -> bool {
         (self.min..=self.max).contains(&value)
     }
-
-    pub fn midpoint(&self) -> f64 {
-        0.5 * (self.min + self.max)
-    }
 }
 
 /// Joint limits of the SO-101, in [`JOINT_NAMES`] order.

@@ -42,7 +42,7 @@ pub struct Args {
     #[arg(long)]
     pub demo: bool,
     /// Exit cleanly after this many seconds of wall time.
-    #[arg(long)]
+    #[arg(long, value_parser = parse_duration)]
     pub duration: Option<f64>,
     #[command(flatten)]
     pub node: NodeArgs,
@@ -59,7 +59,14 @@ fn parse_rate(text: &str) -> Result<f64, String> {
     match text.parse::<f64>() {
         Ok(rate) if rate.is_finite() && rate > 0.0 && rate <= 10_000.0 => Ok(rate),
         _ => Err(format!(
-            "{text:?} is not a rate above 0 and at most 10000 Hz"
+            "{text:?} is not a rate above 0 and at most 10000 Hz (the scene allows up to one period per physics step)"
         )),
+    }
+}
+
+fn parse_duration(text: &str) -> Result<f64, String> {
+    match text.parse::<f64>() {
+        Ok(seconds) if (0.0..=1e9).contains(&seconds) => Ok(seconds),
+        _ => Err(format!("{text:?} is not a number of seconds from 0 to 1e9")),
     }
 }

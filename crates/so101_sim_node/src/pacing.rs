@@ -13,14 +13,20 @@ pub enum TimeMode {
     Lockstep,
 }
 
-/// Parses `--speed`: a positive factor or "max".
+/// Slowest and fastest speed factors `--speed` accepts (beyond them, use lockstep or "max").
+const MIN_SPEED: f64 = 1e-3;
+const MAX_SPEED: f64 = 1e6;
+
+/// Parses `--speed`: a factor from [`MIN_SPEED`] to [`MAX_SPEED`], or "max".
 pub fn parse_speed(text: &str) -> Result<TimeMode, String> {
     if text.eq_ignore_ascii_case("max") {
         return Ok(TimeMode::Max);
     }
     match text.parse::<f64>() {
-        Ok(speed) if speed.is_finite() && speed > 0.0 => Ok(TimeMode::Scaled { speed }),
-        _ => Err(format!("{text:?} is neither a positive number nor \"max\"")),
+        Ok(speed) if (MIN_SPEED..=MAX_SPEED).contains(&speed) => Ok(TimeMode::Scaled { speed }),
+        _ => Err(format!(
+            "{text:?} is neither a factor from {MIN_SPEED} to {MAX_SPEED} nor \"max\""
+        )),
     }
 }
 
@@ -57,7 +63,8 @@ impl Pacer {
         }
     }
 
-    /// How long to sleep before the period that starts at `sim_time` may run.
+    /// How long to sleep before the period that ends at `sim_time` may run (its state is published
+    /// when the wall clock reaches its end).
     pub fn wait_before(&mut self, sim_time: f64, now: Instant) -> Duration {
         let Some(speed) = self.speed else {
             return Duration::ZERO;
@@ -95,7 +102,7 @@ mod tests {
     fn parses_speed_factors_and_max() {
         assert_eq!(parse_speed("max"), Ok(TimeMode::Max));
         assert_eq!(parse_speed("2.5"), Ok(TimeMode::Scaled { speed: 2.5 }));
-        for bad in ["0", "-1", "nan", "inf", "fast"] {
+        for bad in ["0", "-1", "nan", "inf", "fast", "1e-300", "1e300"] {
             assert!(parse_speed(bad).is_err(), "{bad}");
         }
     }

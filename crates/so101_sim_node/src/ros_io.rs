@@ -43,7 +43,7 @@ pub struct NodeDiagnostics {
     pub accepted_commands: u64,
     pub rejected_commands: u64,
     pub episode: u64,
-    pub mujoco_warnings: u64,
+    pub physics_divergences: u64,
     pub pacing_resyncs: u64,
 }
 
@@ -210,10 +210,10 @@ fn diagnostics_message(header: Header, diagnostics: &NodeDiagnostics) -> Diagnos
         key: key.to_owned(),
         value: value.to_string(),
     };
-    let (level, message) = if diagnostics.mujoco_warnings > 0 {
+    let (level, message) = if diagnostics.physics_divergences > 0 {
         (
             DiagnosticStatus::WARN,
-            "MuJoCo reported numerical warnings (see the log)",
+            "the physics diverged and an episode was restarted (see the log)",
         )
     } else {
         (DiagnosticStatus::OK, "running")
@@ -222,14 +222,14 @@ fn diagnostics_message(header: Header, diagnostics: &NodeDiagnostics) -> Diagnos
         header,
         status: vec![DiagnosticStatus {
             level,
-            name: "so101_sim_node: commands".to_owned(),
+            name: "so101_sim_node".to_owned(),
             message: message.to_owned(),
             hardware_id: "so101_sim".to_owned(),
             values: vec![
                 value("accepted_commands", diagnostics.accepted_commands),
                 value("rejected_commands", diagnostics.rejected_commands),
                 value("episode", diagnostics.episode),
-                value("mujoco_warnings", diagnostics.mujoco_warnings),
+                value("physics_divergences", diagnostics.physics_divergences),
                 value("pacing_resyncs", diagnostics.pacing_resyncs),
             ],
         }],
@@ -259,7 +259,8 @@ impl CommandInbox {
         })
     }
 
-    /// Every valid command that arrived since the last call, oldest first.
+    /// Every valid command that arrived since the last call: /joint_commands in arrival order, then
+    /// the array commands in arrival order.
     pub fn drain(&mut self) -> Vec<PartialTargets> {
         let mut accepted = Vec::new();
         loop {

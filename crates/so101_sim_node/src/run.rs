@@ -34,6 +34,9 @@ const DIAGNOSTICS_PERIOD: f64 = 1.0;
 /// control periods, polling every DDS reader each period costs more than the physics.
 const MAX_SPEED_INTAKE_PERIOD: Duration = Duration::from_micros(500);
 
+/// Longest single sleep of the loop, so shutdown and commands are noticed within it.
+const MAX_SLEEP: Duration = Duration::from_millis(50);
+
 /// How often lockstep mode looks for /sim/step calls while idle.
 const LOCKSTEP_POLL: Duration = Duration::from_micros(100);
 
@@ -132,7 +135,9 @@ impl SimLoop {
             if intake_due {
                 self.refuse_steps();
             }
-            self.wait_for_wall_clock();
+            if !self.wait_for_wall_clock() {
+                continue;
+            }
             let report = self.advance_period();
             self.publish(report);
         }
@@ -193,6 +198,8 @@ impl SimLoop {
             return;
         }
         for call in calls {
+            // A command sent before this /sim/step call must act in this very step.
+            self.apply_commands();
             let report = self.advance_period();
             self.publish_and_wait(report);
             let time = self.world.time();
@@ -208,14 +215,18 @@ impl SimLoop {
         }
     }
 
-    fn wait_for_wall_clock(&mut self) {
+    /// Sleeps until the next period may run; false when it slept only part of the way (long waits
+    /// are cut into slices so a signal or a command is not kept waiting).
+    fn wait_for_wall_clock(&mut self) -> bool {
         let period_end = self.world.time() + 1.0 / self.args.rate;
         let wait = self.pacer.wait_before(period_end, Instant::now());
-        if !wait.is_zero() {
-            // Nothing published may wait in a batch while the loop sleeps.
-            self.publisher.flush();
-            std::thread::sleep(wait);
+        if wait.is_zero() {
+            return true;
         }
+        // Nothing published may wait in a batch while the loop sleeps.
+        self.publisher.flush();
+        std::thread::sleep(wait.min(MAX_SLEEP));
+        wait <= MAX_SLEEP
     }
 
     /// Runs the physics for one control period; returns the diagnostics when they are due.
@@ -228,8 +239,10 @@ impl SimLoop {
             *self.world.targets_mut() = script.targets_at(self.world.time() - self.demo_start);
         }
         if !self.world.advance() {
-            self.diagnostics.mujoco_warnings += 1;
-            tracing::warn!("MuJoCo reported a numerical problem and reset the state");
+            self.diagnostics.physics_divergences += 1;
+            tracing::warn!(
+                "the physics diverged (MuJoCo reset its state); the episode restarted from its start"
+            );
         }
         if self.world.time() + 1e-9 < self.next_diagnostics {
             return None;

@@ -31,8 +31,12 @@ pub fn load(path: &Path, lite: bool) -> anyhow::Result<Simulation> {
     let xml = std::fs::read_to_string(path)
         .with_context(|| format!("cannot read the scene {}", path.display()))?;
     let lite_xml = lite_variant(&xml).with_context(|| format!("scene {}", path.display()))?;
-    Simulation::from_xml_text(&lite_xml, "so101_scene_lite.xml")
-        .with_context(|| format!("lite variant of {}", path.display()))
+    {
+        // Named beside the original, so what else the scene refers to is found as without --lite.
+        let name = path.with_file_name("so101_scene_lite.xml");
+        Simulation::from_xml_text(&lite_xml, &name.to_string_lossy())
+    }
+    .with_context(|| format!("lite variant of {}", path.display()))
 }
 
 /// The lite variant of an MJCF scene: every `<mesh>` asset and every geom that uses a mesh is

@@ -104,7 +104,7 @@ pub fn evaluate(kind: TaskKind, dense_shaping: bool, observation: &TaskObservati
     }
 }
 
-/// Staged shaping in [0, 0.8): approach the cube, grasp it, lift it, carry it over the bin. Each
+/// Staged shaping in [0, 0.8]: approach the cube, grasp it, lift it, carry it over the bin. Each
 /// stage adds up to 0.2, so any unfinished episode scores below success (1.0).
 fn cube_to_bin_shaping(observation: &TaskObservation) -> f64 {
     let approach = 1.0 - (10.0 * observation.tip_to_cube()).tanh();

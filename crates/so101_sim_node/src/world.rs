@@ -71,6 +71,8 @@ pub struct World {
     episode_periods: u64,
     episode_steps: u64,
     total_steps: u64,
+    /// Where this episode put the cube (`None`: the scene's own pose).
+    episode_cube: Option<CubeStart>,
 }
 
 fn require(sim: &Simulation, kind: ObjectKind, name: &str) -> Result<usize, WorldError> {
@@ -131,6 +133,7 @@ impl World {
             episode_periods: 0,
             episode_steps: 0,
             total_steps: 0,
+            episode_cube: None,
         };
         world.reset(None);
         Ok(world)
@@ -162,6 +165,7 @@ impl World {
     /// Starts a new episode: arm at home (all joints 0) and holding there, the cube at `cube` (or
     /// where the scene puts it). Sim time goes on from where the last episode ended.
     pub fn reset(&mut self, cube: Option<CubeStart>) {
+        self.episode_cube = cube;
         self.episode_start_time = self.time();
         self.episode_periods = 0;
         self.episode_steps = 0;
@@ -181,11 +185,12 @@ impl World {
         self.sim.forward();
     }
 
-    /// Advances one control period with the current targets. Returns false when MuJoCo reported a
-    /// numerical problem during the period (it resets the state itself in that case).
+    /// Advances one control period with the current targets. Returns false when the physics
+    /// diverged: MuJoCo then resets its state to the model's initial one by itself (and restarts its
+    /// clock, which is how this notices), and the episode is restarted from its own cube pose so
+    /// the seeded episode is not silently replaced by the scene's default.
     pub fn advance(&mut self) -> bool {
         self.write_controls();
-        let warnings_before = self.sim.warning_count();
         let steps = steps_in_period(self.episode_periods, self.control_period, self.timestep);
         for _ in 0..steps {
             self.sim.step();
@@ -193,7 +198,14 @@ impl World {
         self.episode_periods += 1;
         self.episode_steps += steps;
         self.total_steps += steps;
-        self.sim.warning_count() == warnings_before
+        let expected_time = self.episode_steps as f64 * self.timestep;
+        if (self.sim.time() - expected_time).abs() <= 0.5 * self.timestep {
+            return true;
+        }
+        let targets = self.targets;
+        self.reset(self.episode_cube);
+        self.targets = targets;
+        false
     }
 
     fn write_controls(&mut self) {

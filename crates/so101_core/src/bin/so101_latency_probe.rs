@@ -19,8 +19,8 @@ use so101_msgs::sensor_msgs::JointState;
 #[command(version, about)]
 struct Args {
     /// Number of measured round trips.
-    #[arg(long, default_value_t = 500)]
-    samples: usize,
+    #[arg(long, default_value_t = 500, value_parser = clap::value_parser!(u32).range(1..))]
+    samples: u32,
     /// Round trips done first and not counted (discovery, caches).
     #[arg(long, default_value_t = 50)]
     warmup: usize,
@@ -55,8 +55,8 @@ fn main() -> Result<()> {
     // Give the node's command subscription time to match our publisher.
     std::thread::sleep(Duration::from_millis(500));
 
-    let mut latencies = Vec::with_capacity(args.samples);
-    for round in 0..args.warmup + args.samples {
+    let mut latencies = Vec::with_capacity(args.samples as usize);
+    for round in 0..args.warmup + args.samples as usize {
         // Golden-ratio sequence: evenly spread pauses without a random generator.
         let phase = (round as f64 * 0.618_033_988_75).fract();
         std::thread::sleep(Duration::from_secs_f64(args.jitter.max(0.0) * phase));

@@ -14,7 +14,7 @@ use so101_msgs::{builtin_interfaces::Time, rosgraph_msgs::Clock};
 use super::{node::NodeError, qos, shutdown::Shutdown, RosNode};
 
 /// Nanoseconds of the latest /clock message; `None` before the first one.
-#[derive(Clone, Default)]
+#[derive(Clone)]
 pub struct SimClock {
     latest_nanos: Arc<AtomicI64>,
 }

@@ -42,9 +42,12 @@ impl RosEnvironment {
                 .filter(|id| *id <= MAX_DOMAIN_ID)
                 .ok_or(ContextError::BadDomainId(value))?,
         };
+        // RustDDS cannot switch discovery off, so OFF is held to the nearest it can do: this host.
         let localhost_only = lookup("ROS_LOCALHOST_ONLY").is_some_and(|value| value.trim() == "1")
-            || lookup("ROS_AUTOMATIC_DISCOVERY_RANGE")
-                .is_some_and(|value| value.trim().eq_ignore_ascii_case("LOCALHOST"));
+            || lookup("ROS_AUTOMATIC_DISCOVERY_RANGE").is_some_and(|value| {
+                let value = value.trim();
+                value.eq_ignore_ascii_case("LOCALHOST") || value.eq_ignore_ascii_case("OFF")
+            });
         Ok(Self {
             domain_id,
             localhost_only,
@@ -99,6 +102,11 @@ mod tests {
         assert!(!env(&[("ROS_LOCALHOST_ONLY", "0")]).unwrap().localhost_only);
         assert!(
             env(&[("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")])
+                .unwrap()
+                .localhost_only
+        );
+        assert!(
+            env(&[("ROS_AUTOMATIC_DISCOVERY_RANGE", "OFF")])
                 .unwrap()
                 .localhost_only
         );

@@ -110,9 +110,14 @@ impl Simulation {
         Self::with_model(model)
     }
 
-    /// Compiles MJCF text that references no other files (no includes, no meshes).
+    /// Compiles MJCF text held in memory. `name` is a file path: its directory is where files the
+    /// text refers to (includes, textures) are looked up.
     pub fn from_xml_text(xml: &str, name: &str) -> Result<Self, MujocoError> {
         install_log_handlers();
+        if xml.is_empty() {
+            // mj_makeEmptyFileVFS treats an empty file as a fatal error.
+            return Err(MujocoError::Vfs(format!("{name} is empty")));
+        }
         let c_name = CString::new(name).map_err(|_| MujocoError::BadPath(name.to_owned()))?;
         let size = i32::try_from(xml.len())
             .map_err(|_| MujocoError::Vfs("model text too large".into()))?;
@@ -185,11 +190,11 @@ impl Simulation {
     }
 
     pub fn joint_qpos_address(&self, joint: usize) -> usize {
-        self.model_int(self.model().jnt_qposadr, joint)
+        self.model_int(self.model().jnt_qposadr, self.model().njnt, joint)
     }
 
     pub fn joint_dof_address(&self, joint: usize) -> usize {
-        self.model_int(self.model().jnt_dofadr, joint)
+        self.model_int(self.model().jnt_dofadr, self.model().njnt, joint)
     }
 
     /// Position range of a joint, as the model declares it.
@@ -246,7 +251,7 @@ impl Simulation {
     }
 
     pub fn geom_body(&self, geom: usize) -> usize {
-        self.model_int(self.model().geom_bodyid, geom)
+        self.model_int(self.model().geom_bodyid, self.model().ngeom, geom)
     }
 
     /// World position and orientation (w, x, y, z) of a body frame.
@@ -282,18 +287,10 @@ impl Simulation {
             .map(|contact| (contact.geom1 as usize, contact.geom2 as usize))
     }
 
-    /// How often MuJoCo hit each warning condition (bad qacc, too many contacts, ...) since reset.
-    /// On a bad acceleration MuJoCo resets the state by itself and counts it here.
-    pub fn warning_count(&self) -> i64 {
-        self.data()
-            .warning
-            .iter()
-            .map(|warning| i64::from(warning.number))
-            .sum()
-    }
-
-    fn model_int(&self, array: *const i32, index: usize) -> usize {
-        unsafe { *array.add(index) as usize }
+    /// Entry `index` of an integer model array of `len` entries; panics when out of range.
+    fn model_int(&self, array: *const i32, len: i32, index: usize) -> usize {
+        let entries = unsafe { std::slice::from_raw_parts(array, len.max(0) as usize) };
+        entries[index] as usize
     }
 
     fn model_slice(&self, array: *const f64, len: usize) -> &[f64] {
