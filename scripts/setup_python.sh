@@ -17,6 +17,7 @@
 set -euo pipefail
 
 REPO_ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
+. "${REPO_ROOT}/scripts/common.sh"
 REQUIREMENTS="${REPO_ROOT}/scripts/requirements-ros.txt"
 VENV="${VENV:-${REPO_ROOT}/.venv}"
 STAMP="${VENV}/.so101-requirements.stamp"
@@ -46,12 +47,6 @@ else
     [ -n "${PYTHON}" ] ||
         die "no CPython 3.11 or 3.12 found (tried python3, python3.12, python3.11); set PYTHON=/path/to/python3.11"
 fi
-
-sha256_of() {
-    if command -v sha256sum >/dev/null 2>&1; then sha256sum "$1" | cut -d' ' -f1
-    else "${PYTHON}" -c 'import hashlib,sys; print(hashlib.sha256(open(sys.argv[1],"rb").read()).hexdigest())' "$1"
-    fi
-}
 
 WANT="requirements=$(sha256_of "${REQUIREMENTS}") python=${PY_VERSION}"
 
