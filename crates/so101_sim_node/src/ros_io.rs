@@ -240,6 +240,11 @@ fn diagnostics_message(header: Header, diagnostics: &NodeDiagnostics) -> Diagnos
 pub struct CommandInbox {
     joint_commands: Subscription<JointState>,
     array_commands: Subscription<Float64MultiArray>,
+    pub tally: CommandTally,
+}
+
+/// Counts of accepted and rejected commands, and the limiter of rejection warnings.
+pub struct CommandTally {
     warnings: RateLimiter,
     pub accepted: u64,
     pub rejected: u64,
@@ -253,9 +258,11 @@ impl CommandInbox {
                 "forward_position_controller/commands",
                 qos::command_subscription(),
             )?,
-            warnings: RateLimiter::new(Duration::from_secs(1)),
-            accepted: 0,
-            rejected: 0,
+            tally: CommandTally {
+                warnings: RateLimiter::new(Duration::from_secs(1)),
+                accepted: 0,
+                rejected: 0,
+            },
         })
     }
 
@@ -263,51 +270,43 @@ impl CommandInbox {
     /// the array commands in arrival order.
     pub fn drain(&mut self) -> Vec<PartialTargets> {
         let mut accepted = Vec::new();
-        loop {
-            match self.joint_commands.take() {
-                Ok(Some((message, _))) => {
-                    let result = targets_from_joint_state(&message.name, &message.position);
-                    self.record("/joint_commands", result, &mut accepted);
-                }
-                Ok(None) => break,
-                Err(error) => self.reject(
-                    "/joint_commands",
-                    &format!("undecodable message: {error:?}"),
-                ),
-            }
-        }
-        loop {
-            match self.array_commands.take() {
-                Ok(Some((message, _))) => {
-                    let result = targets_from_array(&message.data);
-                    self.record(
-                        "/forward_position_controller/commands",
-                        result,
-                        &mut accepted,
-                    );
-                }
-                Ok(None) => break,
-                Err(error) => self.reject(
-                    "/forward_position_controller/commands",
-                    &format!("undecodable message: {error:?}"),
-                ),
-            }
-        }
+        self.tally.drain(
+            &self.joint_commands,
+            "/joint_commands",
+            &mut accepted,
+            |message| targets_from_joint_state(&message.name, &message.position),
+        );
+        self.tally.drain(
+            &self.array_commands,
+            "/forward_position_controller/commands",
+            &mut accepted,
+            |message| targets_from_array(&message.data),
+        );
         accepted
     }
+}
 
-    fn record(
+impl CommandTally {
+    /// Takes every message waiting on `subscription`, validates it and keeps the valid targets.
+    fn drain<M: 'static + serde::de::DeserializeOwned>(
         &mut self,
+        subscription: &Subscription<M>,
         topic: &str,
-        result: Result<PartialTargets, CommandError>,
         accepted: &mut Vec<PartialTargets>,
+        validate: impl Fn(&M) -> Result<PartialTargets, CommandError>,
     ) {
-        match result {
-            Ok(targets) => {
-                self.accepted += 1;
-                accepted.push(targets);
+        loop {
+            match subscription.take() {
+                Ok(Some((message, _))) => match validate(&message) {
+                    Ok(targets) => {
+                        self.accepted += 1;
+                        accepted.push(targets);
+                    }
+                    Err(error) => self.reject(topic, &error.to_string()),
+                },
+                Ok(None) => break,
+                Err(error) => self.reject(topic, &format!("undecodable message: {error:?}")),
             }
-            Err(error) => self.reject(topic, &error.to_string()),
         }
     }
 

@@ -248,8 +248,8 @@ impl SimLoop {
             return None;
         }
         self.next_diagnostics = self.world.time() + DIAGNOSTICS_PERIOD;
-        self.diagnostics.accepted_commands = self.inbox.accepted;
-        self.diagnostics.rejected_commands = self.inbox.rejected;
+        self.diagnostics.accepted_commands = self.inbox.tally.accepted;
+        self.diagnostics.rejected_commands = self.inbox.tally.rejected;
         self.diagnostics.pacing_resyncs = self.pacer.resyncs;
         Some(self.diagnostics.clone())
     }
