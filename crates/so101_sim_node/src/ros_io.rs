@@ -1,5 +1,5 @@
 //! The node's side of the topic contract: the publishers (on their own thread, so publishing never
-//! slows the physics), the command subscriptions with validation, and the two services.
+//! slows the physics) and the two services. Commands come in through so101_core's CommandInbox.
 
 use std::{
     sync::mpsc::{sync_channel, Receiver, SyncSender},
@@ -7,9 +7,8 @@ use std::{
     time::{Duration, Instant},
 };
 
-use ros2_client::{Publisher, Server, Subscription};
+use ros2_client::{Publisher, Server};
 use so101_core::{
-    command::{targets_from_array, targets_from_joint_state, CommandError, PartialTargets},
     robot::JOINT_NAMES,
     ros::{node::NodeError, qos, rate_limit::RateLimiter, RosNode},
 };
@@ -19,7 +18,7 @@ use so101_msgs::{
     geometry_msgs::{Point, Pose, PoseStamped, Quaternion},
     rosgraph_msgs::Clock,
     sensor_msgs::JointState,
-    std_msgs::{Bool, Float64, Float64MultiArray, Header},
+    std_msgs::{Bool, Float64, Header},
     std_srvs::{Trigger, TriggerRequest, TriggerResponse},
 };
 
@@ -233,93 +232,6 @@ fn diagnostics_message(header: Header, diagnostics: &NodeDiagnostics) -> Diagnos
                 value("pacing_resyncs", diagnostics.pacing_resyncs),
             ],
         }],
-    }
-}
-
-/// The command subscriptions and the rules for accepting what arrives on them.
-pub struct CommandInbox {
-    joint_commands: Subscription<JointState>,
-    array_commands: Subscription<Float64MultiArray>,
-    pub tally: CommandTally,
-}
-
-/// Counts of accepted and rejected commands, and the limiter of rejection warnings.
-pub struct CommandTally {
-    warnings: RateLimiter,
-    pub accepted: u64,
-    pub rejected: u64,
-}
-
-impl CommandInbox {
-    pub fn subscribe(node: &mut RosNode) -> Result<Self, NodeError> {
-        Ok(Self {
-            joint_commands: node.subscription("joint_commands", qos::command_subscription())?,
-            array_commands: node.subscription(
-                "forward_position_controller/commands",
-                qos::command_subscription(),
-            )?,
-            tally: CommandTally {
-                warnings: RateLimiter::new(Duration::from_secs(1)),
-                accepted: 0,
-                rejected: 0,
-            },
-        })
-    }
-
-    /// Every valid command that arrived since the last call: /joint_commands in arrival order, then
-    /// the array commands in arrival order.
-    pub fn drain(&mut self) -> Vec<PartialTargets> {
-        let mut accepted = Vec::new();
-        self.tally.drain(
-            &self.joint_commands,
-            "/joint_commands",
-            &mut accepted,
-            |message| targets_from_joint_state(&message.name, &message.position),
-        );
-        self.tally.drain(
-            &self.array_commands,
-            "/forward_position_controller/commands",
-            &mut accepted,
-            |message| targets_from_array(&message.data),
-        );
-        accepted
-    }
-}
-
-impl CommandTally {
-    /// Takes every message waiting on `subscription`, validates it and keeps the valid targets.
-    fn drain<M: 'static + serde::de::DeserializeOwned>(
-        &mut self,
-        subscription: &Subscription<M>,
-        topic: &str,
-        accepted: &mut Vec<PartialTargets>,
-        validate: impl Fn(&M) -> Result<PartialTargets, CommandError>,
-    ) {
-        loop {
-            match subscription.take() {
-                Ok(Some((message, _))) => match validate(&message) {
-                    Ok(targets) => {
-                        self.accepted += 1;
-                        accepted.push(targets);
-                    }
-                    Err(error) => self.reject(topic, &error.to_string()),
-                },
-                Ok(None) => break,
-                Err(error) => self.reject(topic, &format!("undecodable message: {error:?}")),
-            }
-        }
-    }
-
-    fn reject(&mut self, topic: &str, reason: &str) {
-        self.rejected += 1;
-        if let Some(suppressed) = self.warnings.check(Instant::now()) {
-            tracing::warn!(
-                topic,
-                rejected_total = self.rejected,
-                suppressed,
-                "command rejected: {reason}"
-            );
-        }
     }
 }
 

@@ -7,7 +7,7 @@ use std::{
 };
 
 use anyhow::{Context, Result};
-use so101_core::ros::{shutdown::Shutdown, RosNode};
+use so101_core::ros::{command_inbox::CommandInbox, shutdown::Shutdown, RosNode};
 
 use crate::{
     cli::Args,
@@ -15,7 +15,7 @@ use crate::{
     mujoco,
     pacing::{Pacer, TimeMode},
     placement::{CubePlacer, SpawnArea},
-    ros_io::{CommandInbox, Frame, FramePublisher, NodeDiagnostics, PendingCall, SimServices},
+    ros_io::{Frame, FramePublisher, NodeDiagnostics, PendingCall, SimServices},
     scene, task,
     world::World,
 };

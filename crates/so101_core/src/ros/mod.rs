@@ -1,6 +1,7 @@
 //! ROS 2 plumbing shared by every node of the stack.
 
 pub mod clock;
+pub mod command_inbox;
 pub mod context;
 pub mod logging;
 pub mod names;
