@@ -104,8 +104,46 @@ def pytest_runtest_makereport(item: pytest.Item, call: pytest.CallInfo):
     report = yield
     if report.failed:
         for index, node in enumerate(getattr(item, "_so101_sim_nodes", [])):
-            report.sections.append((f"so101_sim_node #{index} output ({report.when}): {node.describe()}", node.log_tail(20000)))
+            report.sections.append((f"node #{index} output ({report.when}): {node.describe()}", node.log_tail(20000)))
     return report
+
+
+# =========================================================================== the driver + emulator
+@pytest.fixture
+def arm_factory(request: pytest.FixtureRequest, tmp_path: Path):
+    """start(*driver_args, emulator_args=(), calibration=CALIBRATION) -> (SimNode, ServoEmulator):
+    a servo-bus emulator on a pty (linked at tmp_path/bus) and so101_feetech_driver on it with a
+    LeRobot calibration file. At teardown the driver gets SIGINT and must exit 0."""
+    from driver_harness import CALIBRATION, DRIVER_NAME, ServoEmulator, write_calibration
+
+    nodes: list[SimNode] = []
+    emulators: list[ServoEmulator] = []
+    request.node._so101_sim_nodes = nodes
+
+    def start(*args: str, emulator_args=(), calibration=CALIBRATION, wait=True):
+        index = len(emulators)
+        link = tmp_path / f"bus{index}"
+        emulator = ServoEmulator(link, tmp_path / f"emulator.{index}.log", *emulator_args)
+        emulators.append(emulator)
+        cal_path = write_calibration(tmp_path / f"calibration{index}.json", calibration)
+        argv = ["--port", str(link), "--calibration", str(cal_path), *[str(a) for a in args]]
+        node = SimNode(node_binary(DRIVER_NAME), argv, tmp_path / f"{DRIVER_NAME}.{index}.log")
+        nodes.append(node)
+        return node, emulator
+
+    yield start
+
+    problems = []
+    for node in nodes:
+        was_running = node.alive()
+        code = node.stop()
+        if code != 0:
+            how = "after SIGINT" if was_running else "by itself during the test"
+            problems.append(f"{node.describe()} ended {how} with {describe_returncode(code)}; its output:\n{node.log_tail()}")
+    for emulator in emulators:
+        emulator.stop()
+    if problems:
+        pytest.fail("\n\n".join(problems), pytrace=False)
 
 
 # =========================================================================== rclpy

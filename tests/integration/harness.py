@@ -100,19 +100,20 @@ def network_namespace_problem() -> str | None:
 
 
 # =========================================================================== the node process
-def node_binary() -> Path:
-    """Path of so101_sim_node from $SO101_BIN_DIR; fails the test (never skips) when missing."""
+def node_binary(name: str = NODE_NAME) -> Path:
+    """Path of a built binary (default so101_sim_node) from $SO101_BIN_DIR; fails the test (never
+    skips) when missing."""
     bin_dir = os.environ.get("SO101_BIN_DIR")
     default = "${CARGO_TARGET_DIR:-$HOME/.cache/so101/target}/release"
     if not bin_dir:
         pytest.fail(
-            f"SO101_BIN_DIR is not set: it must name the directory holding the built {NODE_NAME} "
+            f"SO101_BIN_DIR is not set: it must name the directory holding the built {name} "
             f"(cargo build --release puts it in {default}).",
             pytrace=False,
         )
-    binary = Path(bin_dir) / NODE_NAME
+    binary = Path(bin_dir) / name
     if not binary.is_file():
-        pytest.fail(f"{NODE_NAME} binary not found at {binary} (SO101_BIN_DIR={bin_dir}); build it first.", pytrace=False)
+        pytest.fail(f"{name} binary not found at {binary} (SO101_BIN_DIR={bin_dir}); build it first.", pytrace=False)
     if not os.access(binary, os.X_OK):
         pytest.fail(f"{binary} is not executable.", pytrace=False)
     return binary

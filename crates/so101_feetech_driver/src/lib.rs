@@ -1,6 +1,16 @@
 //! The physical SO-101 over the Feetech STS3215 servo bus.
 //!
-//! `protocol` is the pure wire protocol (packets, checksums, the control table, timing); it does
-//! no I/O, so it is tested without a bus.
+//! Pure logic, tested without a bus: `protocol` (packets, control table, timing), `calibration`
+//! (LeRobot files, ticks <-> rad), `safety` (goal clamping, step limit, watchdog). I/O: `bus`
+//! (transactions over a serial port), `arm` (the six servos), `node` (the ROS 2 driver), `tools`
+//! (calibrate, setup-motors, scan), `emulator` (STS3215 servos on a pty, for work without an arm).
 
+pub mod arm;
+pub mod bus;
+pub mod calibration;
+pub mod cli;
+pub mod emulator;
+pub mod node;
 pub mod protocol;
+pub mod safety;
+pub mod tools;

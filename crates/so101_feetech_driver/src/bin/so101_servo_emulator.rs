@@ -1,0 +1,162 @@
+//! An STS3215 servo bus on a pseudo-terminal, for running the SO-101 driver without hardware.
+//!
+//! Prints `PTY <path>` once the port is ready, then reads control commands from stdin (one per
+//! line, each answered with one line: `ok`, `error: ...` or the JSON of `dump`).
+
+use std::{
+    io::{BufRead, Write},
+    path::PathBuf,
+    sync::mpsc::{self, RecvTimeoutError},
+    time::Duration,
+};
+
+use anyhow::{bail, Context};
+use clap::{Parser, ValueEnum};
+use so101_core::ros::{logging, shutdown::Shutdown};
+use so101_feetech_driver::emulator::{ControlCommand, Emulator, EmulatorConfig, Timing};
+
+const CONTROL_HELP: &str = "Control commands on stdin, one per line:
+  move ID TICKS        set a servo's shaft (absolute ticks), as a hand does with torque off
+  silent ID on|off     the servo obeys but stops answering
+  error ID BITS        status error bits of every reply (decimal or 0x hex)
+  drop P               probability (0..=1) that a reply is lost
+  corrupt P            probability (0..=1) that a reply has a flipped bit
+  delay MS             extra delay before replies, in milliseconds
+  garbage N            N random bytes before the next reply
+  unplug INDEX         detach the servo in slot INDEX (0-based)
+  plug INDEX           attach it again
+  hangup SECONDS       the adapter disappears; it comes back at the same link after SECONDS
+  clear                all faults off
+  dump                 one JSON line with every slot
+  quit                 stop (as do stdin EOF, SIGINT and SIGTERM)";
+
+#[derive(Debug, Clone, Copy, ValueEnum)]
+enum TimingArg {
+    /// Replies at once.
+    Instant,
+    /// Replies when a half-duplex wire at --baud would deliver them, return delays included.
+    Realistic,
+}
+
+/// Emulates daisy-chained Feetech STS3215 servos behind a USB-serial adapter, on a pty.
+#[derive(Debug, Parser)]
+#[command(name = "so101_servo_emulator", version, after_help = CONTROL_HELP)]
+struct Cli {
+    /// Servo ids, one slot each, in bus order.
+    #[arg(long, value_delimiter = ',', default_value = "1,2,3,4,5,6")]
+    ids: Vec<u8>,
+    /// Slot indices (0-based) plugged in at start; default all.
+    #[arg(long, value_delimiter = ',')]
+    plugged: Option<Vec<usize>>,
+    /// Symlink to the pty, kept across hangups (what the driver should open).
+    #[arg(long)]
+    link: Option<PathBuf>,
+    /// JSON file where the servos' EPROM and shaft positions persist.
+    #[arg(long)]
+    state: Option<PathBuf>,
+    #[arg(long, value_enum, default_value_t = TimingArg::Realistic)]
+    timing: TimingArg,
+    /// Bus speed for realistic timing.
+    #[arg(long, default_value_t = 1_000_000)]
+    baud: u32,
+    /// Time constant of a shaft's approach to its goal, in milliseconds.
+    #[arg(long, default_value_t = 40.0)]
+    tau_ms: f64,
+    /// Seed of the fault injection's random numbers.
+    #[arg(long, default_value_t = 0)]
+    seed: u64,
+    /// Every servo's initial Return_Delay_Time register (units of 2 us; factory 250).
+    #[arg(long)]
+    return_delay: Option<u8>,
+}
+
+impl Cli {
+    fn config(&self) -> anyhow::Result<EmulatorConfig> {
+        let plugged = match &self.plugged {
+            Some(indices) => {
+                if let Some(bad) = indices.iter().find(|index| **index >= self.ids.len()) {
+                    bail!("--plugged {bad}: there are only {} slots", self.ids.len());
+                }
+                Some(
+                    (0..self.ids.len())
+                        .map(|slot| indices.contains(&slot))
+                        .collect(),
+                )
+            }
+            None => None,
+        };
+        if self.baud == 0 {
+            bail!("--baud must be positive");
+        }
+        let tau = Duration::try_from_secs_f64(self.tau_ms / 1000.0)
+            .context("--tau-ms must be a non-negative number")?;
+        Ok(EmulatorConfig {
+            ids: self.ids.clone(),
+            plugged,
+            timing: match self.timing {
+                TimingArg::Instant => Timing::Instant,
+                TimingArg::Realistic => Timing::Realistic { baud: self.baud },
+            },
+            tau,
+            state_file: self.state.clone(),
+            link: self.link.clone(),
+            seed: self.seed,
+            return_delay: self.return_delay,
+        })
+    }
+}
+
+fn main() -> anyhow::Result<()> {
+    logging::init();
+    let cli = Cli::parse();
+    let shutdown = Shutdown::on_signals().context("cannot install signal handlers")?;
+    let emulator = Emulator::start(cli.config()?)?;
+    let mut stdout = std::io::stdout().lock();
+    writeln!(stdout, "PTY {}", emulator.port_path().display())?;
+    stdout.flush()?;
+
+    // stdin is read on its own thread so signals are noticed while no line arrives.
+    let (sender, lines) = mpsc::channel();
+    std::thread::Builder::new()
+        .name("stdin".into())
+        .spawn(move || {
+            for line in std::io::stdin().lock().lines() {
+                if sender.send(line).is_err() {
+                    break;
+                }
+            }
+        })?;
+
+    while !shutdown.is_requested() {
+        let line = match lines.recv_timeout(Duration::from_millis(50)) {
+            Ok(Ok(line)) => line,
+            Ok(Err(error)) => {
+                tracing::warn!(%error, "cannot read stdin; stopping");
+                break;
+            }
+            Err(RecvTimeoutError::Timeout) => continue,
+            Err(RecvTimeoutError::Disconnected) => break,
+        };
+        if line.trim().is_empty() {
+            continue;
+        }
+        let (answer, quit) = match line.parse::<ControlCommand>() {
+            Ok(ControlCommand::Quit) => ("ok".to_owned(), true),
+            Ok(command) => match emulator.control(command) {
+                Ok(answer) => (answer, false),
+                Err(error) => (format!("error: {error}"), false),
+            },
+            Err(error) => (format!("error: {error}"), false),
+        };
+        // A reader that went away cannot be answered; stop as on EOF.
+        if writeln!(stdout, "{answer}")
+            .and_then(|()| stdout.flush())
+            .is_err()
+            || quit
+        {
+            break;
+        }
+    }
+    drop(emulator);
+    Ok(())
+}

@@ -1,0 +1,225 @@
+//! Command-line interface of the so101_feetech_driver binary: the driver node (default) and the
+//! set-up tools `calibrate`, `setup-motors` and `scan`.
+
+use std::{path::PathBuf, time::Duration};
+
+use so101_core::ros::NodeArgs;
+
+use crate::{
+    bus::BusConfig,
+    calibration::{lerobot_calibration_dir, lerobot_calibration_path, ArmRole},
+};
+
+/// The physical SO-101 over its Feetech STS3215 servo bus, behind the same ROS 2 topics as the
+/// simulation: publishes /joint_states (rad), obeys /joint_commands and
+/// /forward_position_controller/commands, serves /torque_enable (std_srvs/SetBool), reports
+/// /diagnostics at 1 Hz. With --leader: torque off, publishes /leader/joint_states.
+#[derive(Debug, clap::Parser)]
+#[command(version, args_conflicts_with_subcommands = true)]
+pub struct Cli {
+    #[command(subcommand)]
+    pub command: Option<Command>,
+    #[command(flatten)]
+    pub run: RunArgs,
+}
+
+#[derive(Debug, clap::Subcommand)]
+pub enum Command {
+    /// Calibrate interactively in a terminal (centre, then sweep); writes the servos' EPROM and the
+    /// LeRobot calibration file.
+    Calibrate(CalibrateArgs),
+    /// Give each servo its id and the bus baud rate, one servo connected at a time.
+    SetupMotors(SetupMotorsArgs),
+    /// Find the servos on the bus: ids, models, firmware, at one or every baud rate.
+    Scan(ScanArgs),
+}
+
+/// Where the bus is.
+#[derive(Debug, Clone, clap::Args)]
+pub struct PortArgs {
+    /// Serial port of the servo bus adapter (or the emulator's pty / symlink).
+    #[arg(long, default_value = "/dev/ttyACM0")]
+    pub port: PathBuf,
+    /// Baud rate of the bus.
+    #[arg(long, default_value_t = 1_000_000)]
+    pub baud: u32,
+    /// Extra attempts after a transaction got no valid answer.
+    #[arg(long, default_value_t = 2)]
+    pub retries: u32,
+    /// Milliseconds allowed for the adapter and the OS on top of the wire time of a transaction.
+    #[arg(long, default_value_t = 10.0, value_parser = parse_positive_ms)]
+    pub bus_slack_ms: f64,
+}
+
+impl PortArgs {
+    pub fn bus_config(&self) -> BusConfig {
+        BusConfig {
+            baud: self.baud,
+            retries: self.retries,
+            slack: Duration::from_secs_f64(self.bus_slack_ms / 1000.0),
+            ..BusConfig::default()
+        }
+    }
+}
+
+/// Which calibration file.
+#[derive(Debug, Clone, clap::Args)]
+pub struct CalibrationArgs {
+    /// Robot id as in LeRobot's --robot.id: names the calibration file in LeRobot's calibration
+    /// directory ($HF_LEROBOT_CALIBRATION or ~/.cache/huggingface/lerobot/calibration).
+    #[arg(long, default_value = "so101")]
+    pub robot_id: String,
+    /// Calibration file to use instead of LeRobot's location.
+    #[arg(long)]
+    pub calibration: Option<PathBuf>,
+    /// A leader arm (teleoperators/so_leader/ in LeRobot's layout; torque stays off).
+    #[arg(long)]
+    pub leader: bool,
+}
+
+impl CalibrationArgs {
+    pub fn role(&self) -> ArmRole {
+        if self.leader {
+            ArmRole::Leader
+        } else {
+            ArmRole::Follower
+        }
+    }
+
+    pub fn path(&self) -> PathBuf {
+        self.calibration.clone().unwrap_or_else(|| {
+            let base = lerobot_calibration_dir(|name| std::env::var(name).ok());
+            lerobot_calibration_path(&base, self.role(), &self.robot_id)
+        })
+    }
+}
+
+/// Options of the driver node.
+#[derive(Debug, Clone, clap::Args)]
+pub struct RunArgs {
+    #[command(flatten)]
+    pub port: PortArgs,
+    #[command(flatten)]
+    pub calibration: CalibrationArgs,
+    /// Control cycles per second (each: one SYNC_READ of positions, one SYNC_WRITE of goals), or
+    /// "max" for as fast as the bus allows.
+    #[arg(long, default_value = "200", value_parser = parse_rate)]
+    pub rate: CycleRate,
+    /// Reads per second of velocity, load, voltage, temperature and current.
+    #[arg(long, default_value_t = 10.0, value_parser = parse_positive)]
+    pub telemetry_rate: f64,
+    /// Largest distance (rad) a goal may be from the joint's present position (like LeRobot's
+    /// max_relative_target); bigger jumps are approached over several cycles.
+    #[arg(long, default_value_t = 0.1, value_parser = parse_positive)]
+    pub max_step: f64,
+    /// Seconds without a command after which the arm holds where it is; 0 turns the watchdog off.
+    #[arg(long, default_value_t = 0.5, value_parser = parse_non_negative)]
+    pub command_timeout: f64,
+    /// Max_Torque_Limit of the gripper, of 1000 (LeRobot's 500 keeps it from overheating).
+    #[arg(long, default_value_t = 500, value_parser = clap::value_parser!(i32).range(1..=1000))]
+    pub gripper_torque_limit: i32,
+    /// Start with torque off (enable later with the torque_enable service).
+    #[arg(long)]
+    pub start_torque_off: bool,
+    /// Leave torque on when the node exits (default: torque off, the arm goes limp).
+    #[arg(long)]
+    pub keep_torque_on_exit: bool,
+    /// Seconds between reconnection attempts after the bus was lost.
+    #[arg(long, default_value_t = 0.5, value_parser = parse_positive)]
+    pub reconnect_interval: f64,
+    /// Seconds of failed position reads (every servo silent) after which the port is reopened.
+    #[arg(long, default_value_t = 1.0, value_parser = parse_positive)]
+    pub reopen_after: f64,
+    /// Exit cleanly after this many seconds.
+    #[arg(long, value_parser = parse_non_negative)]
+    pub duration: Option<f64>,
+    /// Write a JSON summary of the run (cycles/s, jitter, CPU, bus counters) here on exit.
+    #[arg(long)]
+    pub stats_json: Option<PathBuf>,
+    #[command(flatten)]
+    pub node: NodeArgs,
+}
+
+#[derive(Debug, Clone, clap::Args)]
+pub struct CalibrateArgs {
+    #[command(flatten)]
+    pub port: PortArgs,
+    #[command(flatten)]
+    pub calibration: CalibrationArgs,
+}
+
+#[derive(Debug, Clone, clap::Args)]
+pub struct SetupMotorsArgs {
+    #[command(flatten)]
+    pub port: PortArgs,
+    /// Set up only these joints (default: all, gripper first like LeRobot).
+    #[arg(long, value_delimiter = ',')]
+    pub joints: Vec<String>,
+}
+
+#[derive(Debug, Clone, clap::Args)]
+pub struct ScanArgs {
+    #[command(flatten)]
+    pub port: PortArgs,
+    /// Try every baud rate the servos support, not only --baud.
+    #[arg(long)]
+    pub all_bauds: bool,
+    /// Highest id to ping.
+    #[arg(long, default_value_t = 252)]
+    pub max_id: u8,
+    /// Print the result as JSON.
+    #[arg(long)]
+    pub json: bool,
+}
+
+/// How often the control loop runs.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum CycleRate {
+    Hz(f64),
+    Max,
+}
+
+impl CycleRate {
+    pub fn period(self) -> Option<Duration> {
+        match self {
+            Self::Hz(hz) => Some(Duration::from_secs_f64(1.0 / hz)),
+            Self::Max => None,
+        }
+    }
+}
+
+fn parse_rate(text: &str) -> Result<CycleRate, String> {
+    if text == "max" {
+        return Ok(CycleRate::Max);
+    }
+    match text.parse::<f64>() {
+        Ok(hz) if hz.is_finite() && hz > 0.0 && hz <= 5000.0 => Ok(CycleRate::Hz(hz)),
+        _ => Err(format!(
+            "{text:?} is not \"max\" or a rate above 0 and at most 5000 Hz"
+        )),
+    }
+}
+
+fn parse_positive(text: &str) -> Result<f64, String> {
+    match text.parse::<f64>() {
+        Ok(value) if value.is_finite() && value > 0.0 => Ok(value),
+        _ => Err(format!("{text:?} is not a number above 0")),
+    }
+}
+
+fn parse_non_negative(text: &str) -> Result<f64, String> {
+    match text.parse::<f64>() {
+        Ok(value) if value.is_finite() && (0.0..=1e9).contains(&value) => Ok(value),
+        _ => Err(format!("{text:?} is not a number from 0 to 1e9")),
+    }
+}
+
+fn parse_positive_ms(text: &str) -> Result<f64, String> {
+    parse_positive(text).and_then(|ms| {
+        if ms <= 10_000.0 {
+            Ok(ms)
+        } else {
+            Err(format!("{text:?} ms is more than 10 s"))
+        }
+    })
+}

@@ -1,0 +1,35 @@
+//! A faithful STS3215 servo-bus emulator on a pseudo-terminal: it stands in for the USB-serial
+//! adapter and the daisy-chained servos, so the driver is tested and benchmarked without hardware.
+//!
+//! - `servo`: one servo's control table and shaft physics (pure).
+//! - `bus`: the servos on one bus, instruction semantics, faults and wire timing (pure).
+//! - `control`: the runtime control commands (`move 1 2048`, `drop 0.1`, `dump`, ...) (pure).
+//! - `pty`: serving the bus on a pty, with hangups and a symlink that survives them (I/O).
+
+pub mod bus;
+pub mod control;
+pub mod pty;
+pub mod servo;
+
+use std::path::PathBuf;
+
+pub use bus::{BusEmulator, Faults, Response, SlotSnapshot, SlotState, Timing};
+pub use control::{ControlCommand, ControlError};
+pub use pty::{Emulator, EmulatorConfig};
+pub use servo::ServoModel;
+
+#[derive(Debug, thiserror::Error)]
+pub enum EmulatorError {
+    #[error("cannot open a pseudo-terminal: {0}")]
+    OpenPty(#[source] nix::Error),
+    #[error("cannot make the pseudo-terminal raw: {0}")]
+    RawMode(#[source] nix::Error),
+    #[error("bad link path {path}: {reason}")]
+    BadLink { path: PathBuf, reason: String },
+    #[error("cannot read state file {path}: {reason}")]
+    StateFile { path: PathBuf, reason: String },
+    #[error("cannot save state file {path}: {reason}")]
+    SaveState { path: PathBuf, reason: String },
+    #[error("cannot start the emulator thread: {0}")]
+    Thread(#[source] std::io::Error),
+}

@@ -1,0 +1,20 @@
+//! Set-up tools of the binary: calibration, motor ids and baud, bus scan. Each keeps its
+//! procedure (talking to the bus) apart from the terminal prompts, so tests drive the procedure
+//! against the emulator.
+
+pub mod calibrate;
+pub mod scan;
+pub mod setup_motors;
+
+use std::io::{BufRead, Write};
+
+/// Prints `prompt` and waits for Enter; an error when stdin is closed (no user to answer).
+pub fn wait_for_enter(prompt: &str) -> anyhow::Result<()> {
+    print!("{prompt} [Enter] ");
+    std::io::stdout().flush()?;
+    let mut line = String::new();
+    if std::io::stdin().lock().read_line(&mut line)? == 0 {
+        anyhow::bail!("standard input closed while waiting for Enter: run this in a terminal");
+    }
+    Ok(())
+}

@@ -1,0 +1,114 @@
+//! Finding servos: ping every id at one baud rate (or each one the servos support) and ask the
+//! ones that answer for model and firmware.
+
+use std::time::Duration;
+
+use anyhow::Result;
+
+use crate::{
+    arm::{identify, open_bus, ServoInfo},
+    bus::{BusConfig, BusError, ServoBus},
+    cli::ScanArgs,
+};
+
+/// Baud rates by Baud_Rate register index (indices 0-4 agree between LeRobot and Feetech).
+pub const BAUD_RATES: [(i32, u32); 5] = [
+    (0, 1_000_000),
+    (1, 500_000),
+    (2, 250_000),
+    (3, 128_000),
+    (4, 115_200),
+];
+
+/// The Baud_Rate register index of `baud`.
+pub fn baud_index(baud: u32) -> Option<i32> {
+    BAUD_RATES
+        .iter()
+        .find(|(_, rate)| *rate == baud)
+        .map(|(index, _)| *index)
+}
+
+#[derive(Debug, Clone, serde::Serialize)]
+pub struct Found {
+    pub baud: u32,
+    pub servos: Vec<ServoInfo>,
+}
+
+/// Pings ids 1..=max_id; a missing id costs one short timeout, not the default retries.
+pub fn find_servos(bus: &mut ServoBus, max_id: u8) -> Result<Vec<ServoInfo>, BusError> {
+    let mut found = Vec::new();
+    for id in 1..=max_id.min(crate::protocol::MAX_ID) {
+        match bus.ping(id) {
+            Ok(_) => found.push(identify(bus, id)?),
+            Err(BusError::NoAnswer { .. }) => {}
+            Err(error) => return Err(error),
+        }
+    }
+    Ok(found)
+}
+
+/// Bus settings for probing: no retries and a short wait (an absent id never answers).
+pub fn probe_config(base: BusConfig) -> BusConfig {
+    BusConfig {
+        retries: 0,
+        slack: Duration::from_millis(3).min(base.slack),
+        ..base
+    }
+}
+
+pub fn run(args: &ScanArgs) -> Result<()> {
+    let bauds: Vec<u32> = if args.all_bauds {
+        BAUD_RATES.iter().map(|(_, baud)| *baud).collect()
+    } else {
+        vec![args.port.baud]
+    };
+    let mut results = Vec::new();
+    for baud in bauds {
+        let config = probe_config(BusConfig {
+            baud,
+            ..args.port.bus_config()
+        });
+        let mut bus = open_bus(&args.port.port, config)?;
+        let servos = find_servos(&mut bus, args.max_id)?;
+        let stats = bus.stats();
+        if stats.checksum_errors > 0 {
+            tracing::warn!(
+                baud,
+                checksum_errors = stats.checksum_errors,
+                "corrupted answers during the scan"
+            );
+        }
+        results.push(Found { baud, servos });
+    }
+    if args.json {
+        println!("{}", serde_json::to_string_pretty(&results)?);
+        return Ok(());
+    }
+    for found in &results {
+        println!("{} baud: {} servo(s)", found.baud, found.servos.len());
+        for servo in &found.servos {
+            let model = if servo.model == i32::from(crate::protocol::registers::STS3215_MODEL) {
+                "STS3215".to_owned()
+            } else {
+                format!("model {}", servo.model)
+            };
+            println!(
+                "  id {:>3}  {model}  firmware {}.{}",
+                servo.id, servo.firmware.0, servo.firmware.1
+            );
+        }
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn baud_indices_follow_the_servo_table() {
+        assert_eq!(baud_index(1_000_000), Some(0));
+        assert_eq!(baud_index(115_200), Some(4));
+        assert_eq!(baud_index(9600), None);
+    }
+}

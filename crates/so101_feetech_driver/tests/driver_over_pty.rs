@@ -1,0 +1,399 @@
+//! The driver's bus side against the servo emulator over a real pseudo-terminal, opened with the
+//! serialport crate exactly as a USB adapter is: handshake and configuration, reads and writes,
+//! every fault class, reconnection, calibration and motor set-up.
+
+// Test helpers fail loudly: a panic is the right report here.
+#![allow(clippy::unwrap_used)]
+
+use std::{
+    path::{Path, PathBuf},
+    time::{Duration, Instant},
+};
+
+use so101_feetech_driver::{
+    arm::{open_bus, Arm, ArmSettings},
+    bus::{BusConfig, BusError},
+    calibration::{ArmCalibration, ArmRole},
+    emulator::{Emulator, EmulatorConfig, SlotSnapshot, Timing},
+    tools::{
+        calibrate::{CalibrateError, Calibration},
+        scan::{find_servos, probe_config},
+        setup_motors::{assign, SetupError},
+    },
+};
+
+const CALIBRATION: &str = r#"{
+    "shoulder_pan": {"id": 1, "drive_mode": 0, "homing_offset": 100, "range_min": 1000, "range_max": 3000},
+    "shoulder_lift": {"id": 2, "drive_mode": 0, "homing_offset": -200, "range_min": 900, "range_max": 3100},
+    "elbow_flex": {"id": 3, "drive_mode": 0, "homing_offset": 0, "range_min": 1000, "range_max": 3000},
+    "wrist_flex": {"id": 4, "drive_mode": 0, "homing_offset": 0, "range_min": 1000, "range_max": 3000},
+    "wrist_roll": {"id": 5, "drive_mode": 0, "homing_offset": 0, "range_min": 0, "range_max": 4095},
+    "gripper": {"id": 6, "drive_mode": 0, "homing_offset": 0, "range_min": 2000, "range_max": 3000}
+}"#;
+
+struct Bench {
+    emulator: Emulator,
+    _dir: tempfile::TempDir,
+    link: PathBuf,
+}
+
+fn emulator(config: EmulatorConfig) -> Bench {
+    let dir = tempfile::tempdir().unwrap();
+    let link = dir.path().join("bus");
+    let emulator = Emulator::start(EmulatorConfig {
+        link: Some(link.clone()),
+        ..config
+    })
+    .unwrap();
+    Bench {
+        emulator,
+        _dir: dir,
+        link,
+    }
+}
+
+fn calibration() -> ArmCalibration {
+    ArmCalibration::from_json(CALIBRATION, Path::new("test.json")).unwrap()
+}
+
+fn settings(retries: u32) -> ArmSettings {
+    ArmSettings {
+        bus: BusConfig {
+            retries,
+            slack: Duration::from_millis(5),
+            ..BusConfig::default()
+        },
+        role: ArmRole::Follower,
+        gripper_torque_limit: 500,
+    }
+}
+
+fn slot(bench: &Bench, index: usize) -> SlotSnapshot {
+    bench.emulator.snapshot()[index].clone()
+}
+
+fn control(bench: &Bench, line: &str) {
+    bench.emulator.control_line(line).unwrap();
+}
+
+#[test]
+fn connect_configures_the_servos_like_lerobot_and_writes_the_calibration() {
+    let bench = emulator(EmulatorConfig {
+        timing: Timing::Realistic { baud: 1_000_000 },
+        ..EmulatorConfig::default()
+    });
+    let arm = Arm::connect(&bench.link, &settings(2), calibration()).unwrap();
+    assert_eq!(arm.servos.len(), 6);
+    assert!(arm.servos.iter().all(|servo| servo.model == 777));
+    for (index, servo) in bench.emulator.snapshot().iter().enumerate() {
+        assert_eq!(servo.return_delay_time, 0, "slot {index}");
+        assert_eq!(servo.acceleration, 254);
+        assert_eq!((servo.p, servo.i, servo.d), (16, 0, 32));
+        assert_eq!(servo.operating_mode, 0);
+        assert_eq!(servo.lock, 1, "EPROM locked again");
+        assert_eq!(servo.torque_enable, 0);
+        let motor = arm.calibration.motors[index];
+        assert_eq!(servo.homing_offset, motor.homing_offset);
+        assert_eq!(
+            (servo.min_position_limit, servo.max_position_limit),
+            (motor.range_min, motor.range_max)
+        );
+    }
+    let gripper = slot(&bench, 5);
+    assert_eq!(gripper.max_torque_limit, 500);
+    assert_eq!(gripper.torque_limit, 500);
+    assert_eq!(gripper.protection_current, 250);
+    assert_eq!(gripper.overload_torque, 25);
+    assert_eq!(
+        slot(&bench, 0).max_torque_limit,
+        1000,
+        "only the gripper is limited"
+    );
+}
+
+#[test]
+fn goals_written_with_torque_on_move_the_servos() {
+    let bench = emulator(EmulatorConfig::default());
+    let mut arm = Arm::connect(&bench.link, &settings(2), calibration()).unwrap();
+    let start = arm.read_positions().unwrap();
+    // The servo subtracts its homing offset: the shaft at 2048 reads 2048 - 100 on shoulder_pan.
+    assert_eq!(start[0], 2048 - 100);
+    assert_eq!(start[1], 2048 + 200);
+    arm.set_torque(true).unwrap();
+    let goals = [1500, 2500, 1800, 2200, 3000, 2900];
+    arm.write_goals(&goals).unwrap();
+    let deadline = Instant::now() + Duration::from_secs(3);
+    loop {
+        let now = arm.read_positions().unwrap();
+        if now.iter().zip(&goals).all(|(a, b)| (a - b).abs() <= 3) {
+            break;
+        }
+        assert!(
+            Instant::now() < deadline,
+            "servos did not reach {goals:?}: {now:?}"
+        );
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    let telemetry = arm.read_telemetry().unwrap();
+    assert!(telemetry
+        .iter()
+        .all(|t| t.voltage > 5.0 && t.temperature > 0));
+    arm.set_torque(false).unwrap();
+    assert!(bench
+        .emulator
+        .snapshot()
+        .iter()
+        .all(|s| s.torque_enable == 0));
+}
+
+#[test]
+fn lost_replies_are_retried_and_counted() {
+    let bench = emulator(EmulatorConfig {
+        seed: 7,
+        ..EmulatorConfig::default()
+    });
+    let mut arm = Arm::connect(&bench.link, &settings(3), calibration()).unwrap();
+    control(&bench, "drop 0.05");
+    let mut failures = 0;
+    for _ in 0..200 {
+        if arm.read_positions().is_err() {
+            failures += 1;
+        }
+    }
+    let stats = arm.bus.stats();
+    assert!(stats.retries > 0 && stats.timeouts > 0, "{stats:?}");
+    // With 6 replies per read, ~26 % of attempts lose one; four attempts rarely all do.
+    assert!(
+        failures <= 5,
+        "{failures} of 200 reads failed despite retries"
+    );
+    assert_eq!(stats.failures, failures);
+}
+
+#[test]
+fn no_answer_at_all_fails_after_the_retries_and_names_the_servos() {
+    let bench = emulator(EmulatorConfig::default());
+    let mut arm = Arm::connect(&bench.link, &settings(1), calibration()).unwrap();
+    control(&bench, "drop 1");
+    match arm.read_positions() {
+        Err(BusError::NoAnswer {
+            missing, attempts, ..
+        }) => {
+            assert_eq!(missing, [1, 2, 3, 4, 5, 6]);
+            assert_eq!(attempts, 2);
+        }
+        other => panic!("expected NoAnswer, got {other:?}"),
+    }
+    control(&bench, "clear");
+    assert!(
+        arm.read_positions().is_ok(),
+        "the bus recovers once replies come back"
+    );
+}
+
+#[test]
+fn a_silent_servo_is_named_and_the_others_still_answer_next_time() {
+    let bench = emulator(EmulatorConfig::default());
+    let mut arm = Arm::connect(&bench.link, &settings(1), calibration()).unwrap();
+    control(&bench, "silent 3 on");
+    match arm.read_positions() {
+        Err(BusError::NoAnswer { missing, .. }) => assert_eq!(missing, [3]),
+        other => panic!("expected NoAnswer for id 3, got {other:?}"),
+    }
+    control(&bench, "silent 3 off");
+    assert!(arm.read_positions().is_ok());
+}
+
+#[test]
+fn corrupted_replies_are_detected_never_decoded() {
+    let bench = emulator(EmulatorConfig {
+        seed: 3,
+        ..EmulatorConfig::default()
+    });
+    let mut arm = Arm::connect(&bench.link, &settings(1), calibration()).unwrap();
+    let good = arm.read_positions().unwrap();
+    control(&bench, "corrupt 1");
+    assert!(matches!(
+        arm.read_positions(),
+        Err(BusError::NoAnswer { .. })
+    ));
+    assert!(arm.bus.stats().checksum_errors > 0);
+    control(&bench, "corrupt 0.2");
+    for _ in 0..100 {
+        // Whatever got through was a valid packet: the values are the real ones.
+        if let Ok(positions) = arm.read_positions() {
+            assert_eq!(positions, good);
+        }
+    }
+}
+
+#[test]
+fn garbage_bytes_and_late_replies_do_not_desynchronise_the_bus() {
+    let bench = emulator(EmulatorConfig::default());
+    let mut arm = Arm::connect(&bench.link, &settings(1), calibration()).unwrap();
+    let good = arm.read_positions().unwrap();
+    control(&bench, "garbage 40");
+    assert_eq!(arm.read_positions().unwrap(), good);
+    assert!(arm.bus.stats().garbage_bytes >= 1);
+    // Replies that come after the wait are dropped, and the next read is clean again.
+    control(&bench, "delay 30");
+    assert!(arm.read_positions().is_err());
+    control(&bench, "clear");
+    std::thread::sleep(Duration::from_millis(100));
+    assert_eq!(arm.read_positions().unwrap(), good);
+}
+
+#[test]
+fn an_unplugged_adapter_is_reported_and_reattached_without_dropping_torque() {
+    let bench = emulator(EmulatorConfig::default());
+    let mut arm = Arm::connect(&bench.link, &settings(1), calibration()).unwrap();
+    arm.set_torque(true).unwrap();
+    control(&bench, "hangup 0.5");
+    let deadline = Instant::now() + Duration::from_secs(2);
+    let error = loop {
+        match arm.read_positions() {
+            Err(error) if error.is_disconnected() => break error,
+            _ => assert!(Instant::now() < deadline, "the hang-up was never noticed"),
+        }
+    };
+    assert!(error.to_string().contains("serial port"), "{error}");
+    drop(arm);
+    let deadline = Instant::now() + Duration::from_secs(5);
+    let mut arm = loop {
+        match Arm::reattach(&bench.link, &settings(1), calibration()) {
+            Ok(arm) => break arm,
+            Err(_) if Instant::now() < deadline => std::thread::sleep(Duration::from_millis(100)),
+            Err(error) => panic!("no reconnection: {error}"),
+        }
+    };
+    assert!(arm.read_positions().is_ok());
+    assert!(
+        bench
+            .emulator
+            .snapshot()
+            .iter()
+            .all(|s| s.torque_enable == 1),
+        "reattaching must not drop a holding arm"
+    );
+}
+
+#[test]
+fn calibration_centres_on_the_pose_and_records_the_sweep() {
+    let bench = emulator(EmulatorConfig::default());
+    let ids = [1, 2, 3, 4, 5, 6];
+    let mut bus = open_bus(&bench.link, settings(1).bus).unwrap();
+    let mut session = Calibration::begin(&mut bus, ids).unwrap();
+    // The user holds the arm in the middle of its range: shafts at these raw positions.
+    let centre = [1800, 2300, 2047, 1500, 2600, 2100];
+    for (id, raw) in ids.iter().zip(centre) {
+        control(&bench, &format!("move {id} {raw}"));
+    }
+    session.set_centre().unwrap();
+    session.sample().unwrap();
+    // The sweep: each joint (wrist_roll included, whose range stays full) to both ends.
+    let ends = [
+        (-700, 900),
+        (-1000, 800),
+        (-950, 950),
+        (-600, 1100),
+        (-2000, 2000),
+        (0, 1200),
+    ];
+    for (index, (low, high)) in ends.iter().enumerate() {
+        for delta in [*low, *high, 0] {
+            control(
+                &bench,
+                &format!("move {} {}", ids[index], centre[index] + delta),
+            );
+            session.sample().unwrap();
+        }
+    }
+    let result = session.finish().unwrap();
+    for (index, motor) in result.motors.iter().enumerate() {
+        assert_eq!(motor.homing_offset, centre[index] - 2047, "joint {index}");
+        if index == 4 {
+            assert_eq!((motor.range_min, motor.range_max), (0, 4095));
+        } else {
+            assert_eq!(
+                (motor.range_min, motor.range_max),
+                (2047 + ends[index].0, 2047 + ends[index].1),
+                "joint {index}"
+            );
+        }
+        let servo = slot(&bench, index);
+        assert_eq!(servo.homing_offset, motor.homing_offset);
+        assert_eq!(servo.min_position_limit, motor.range_min);
+        assert_eq!(servo.max_position_limit, motor.range_max);
+        assert_eq!(servo.lock, 1);
+    }
+    // What LeRobot would read back is what the driver now uses.
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("robots/so_follower/arm.json");
+    result.save(&path).unwrap();
+    assert_eq!(ArmCalibration::load(&path).unwrap(), result);
+}
+
+#[test]
+fn calibration_refuses_a_joint_that_was_not_swept_or_an_impossible_offset() {
+    let bench = emulator(EmulatorConfig::default());
+    let mut bus = open_bus(&bench.link, settings(1).bus).unwrap();
+    let mut session = Calibration::begin(&mut bus, [1, 2, 3, 4, 5, 6]).unwrap();
+    session.set_centre().unwrap();
+    session.sample().unwrap();
+    assert!(matches!(
+        session.finish(),
+        Err(CalibrateError::NoSweep {
+            joint: "shoulder_pan",
+            ..
+        })
+    ));
+    let mut session = Calibration::begin(&mut bus, [1, 2, 3, 4, 5, 6]).unwrap();
+    control(&bench, "move 5 4095");
+    assert!(matches!(
+        session.set_centre(),
+        Err(CalibrateError::OffsetOutOfRange {
+            joint: "wrist_roll",
+            ..
+        })
+    ));
+}
+
+#[test]
+fn setup_motors_gives_each_factory_servo_its_id_one_at_a_time() {
+    // Two factory-new servos, both id 1; only the first is connected.
+    let bench = emulator(EmulatorConfig {
+        ids: vec![1, 1],
+        plugged: Some(vec![true, false]),
+        ..EmulatorConfig::default()
+    });
+    let mut bus = open_bus(&bench.link, probe_config(settings(0).bus)).unwrap();
+    assert_eq!(assign(&mut bus, 6, 1_000_000).unwrap(), 1);
+    control(&bench, "unplug 0");
+    control(&bench, "plug 1");
+    assert_eq!(assign(&mut bus, 5, 1_000_000).unwrap(), 1);
+    let ids: Vec<u8> = bench.emulator.snapshot().iter().map(|s| s.id).collect();
+    assert_eq!(ids, [6, 5]);
+    control(&bench, "plug 0");
+    let found = find_servos(&mut bus, 10).unwrap();
+    assert_eq!(found.iter().map(|s| s.id).collect::<Vec<_>>(), [5, 6]);
+    assert!(matches!(
+        assign(&mut bus, 4, 1_000_000),
+        Err(SetupError::SeveralServos(2, _))
+    ));
+}
+
+#[test]
+fn scan_finds_every_servo_with_model_and_firmware() {
+    let bench = emulator(EmulatorConfig::default());
+    let mut bus = open_bus(&bench.link, probe_config(settings(0).bus)).unwrap();
+    let started = Instant::now();
+    let found = find_servos(&mut bus, 252).unwrap();
+    assert_eq!(
+        found.iter().map(|s| s.id).collect::<Vec<_>>(),
+        [1, 2, 3, 4, 5, 6]
+    );
+    assert!(found
+        .iter()
+        .all(|s| s.model == 777 && s.firmware == (3, 10)));
+    assert!(started.elapsed() < Duration::from_secs(5), "scan too slow");
+}
