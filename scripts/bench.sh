@@ -1,9 +1,18 @@
 #!/usr/bin/env bash
 # Run the benchmarks of docs/benchmarks.md (set-up first), all peers in one private network namespace.
-#   scripts/bench.sh [--repeats N] [--seconds S] [--samples N] [--json FILE]
+#   scripts/bench.sh                     both, with their defaults
+#   scripts/bench.sh sim [--repeats N] [--seconds S] [--samples N] [--json FILE]
+#   scripts/bench.sh driver [--repeats N] [--seconds S] [--baud B] [--json FILE]
 set -euo pipefail
 . "$(dirname "${BASH_SOURCE[0]}")/common.sh"
 REPO_ROOT="${SO101_ROOT}"
 "${REPO_ROOT}/scripts/setup.sh"
-exec "${REPO_ROOT}/scripts/isolated" "${REPO_ROOT}/.venv/bin/python" "${REPO_ROOT}/scripts/bench_sim.py" \
-    --bin-dir "${CARGO_TARGET_DIR}/release" "$@"
+run() {
+    "${REPO_ROOT}/scripts/isolated" "${REPO_ROOT}/.venv/bin/python" "${REPO_ROOT}/scripts/bench_$1.py" \
+        --bin-dir "${CARGO_TARGET_DIR}/release" "${@:2}"
+}
+case "${1:-all}" in
+    sim | driver) run "$@" ;;
+    all) run sim && run driver ;;
+    *) echo "usage: scripts/bench.sh [sim|driver] [ARGS...]" >&2; exit 2 ;;
+esac

@@ -279,6 +279,10 @@ def test_leader_mode_publishes_hand_motion_and_never_drives_the_servos(arm_facto
     assert emulator.goals() == goals, "a leader must never be sent goals"
     topics = ros.topics()
     assert "/joint_states" not in topics
+    # The node's own name reaches the graph through discovery, a little after its topics.
+    wait_until(
+        lambda: ("so101_leader_driver", "/") in ros.node.get_node_names_and_namespaces(), 15.0, "the leader node in the graph", node
+    )
     subs = dict(ros.node.get_subscriber_names_and_types_by_node("so101_leader_driver", "/"))
     assert "/joint_commands" not in subs
     answer = ros.call(SetBool, "/torque_enable", SetBool.Request(data=True), sim=node)
@@ -340,3 +344,31 @@ def test_diagnostics_report_every_servo_at_one_hertz(arm_factory, ros):
     bus = {kv.key: kv.value for kv in last.status[0].values}
     assert 150 <= float(bus["cycle_rate_hz"]) <= 210, bus
     assert int(bus["transactions"]) > 0 and bus["timeouts"] == "0", bus
+
+
+def test_a_wrong_calibration_file_never_moves_a_servo(arm_factory, tmp_path):
+    # shoulder_pan calibrated to 100..1000, but the servo reads ~2000: the file belongs to another
+    # arm. Holding "present, clamped into the range" would swing the joint; the driver refuses.
+    wrong = {**CALIBRATION, "shoulder_pan": {**CALIBRATION["shoulder_pan"], "range_min": 100, "range_max": 1000}}
+    node, emulator = arm_factory(calibration=wrong)
+    node.exit_expected = True
+    code = node.proc.wait(timeout=30)
+    assert code != 0, node.log_tail()
+    assert "far outside its calibrated range" in node.log(), node.log_tail()
+    slots = emulator.slots()
+    assert all(slot["torque_enable"] == 0 for slot in slots), slots
+    # Holding the bad reading would have meant a goal inside the (wrong) range: none was written.
+    assert not 100 <= slots[0]["goal_position"] <= 1000, slots[0]
+
+
+def test_shutdown_with_the_servos_silent_still_turns_torque_off(arm_factory, ros):
+    # Every reply lost: the driver goes disconnected; on exit it broadcasts torque off, which the
+    # servos obey without answering.
+    node, emulator = arm_factory("--reopen-after", "0.3", "--retries", "0", "--bus-slack-ms", "2")
+    subscribe_joint_states(ros).wait_count(1, 30.0, node)
+    assert all(slot["torque_enable"] == 1 for slot in emulator.slots())
+    emulator.command("drop 1")
+    time.sleep(1.5)
+    assert "bus lost" in node.log(), node.log_tail()
+    assert node.stop() == 0
+    assert all(slot["torque_enable"] == 0 for slot in emulator.slots()), emulator.slots()

@@ -37,6 +37,8 @@ pub enum ArmError {
         id: u8,
         model: i32,
     },
+    #[error("the servos' EPROM calibration differs from the calibration file: these are not the servos that were connected (recalibrated or swapped?). Restart the driver to configure them")]
+    CalibrationChanged,
     #[error(transparent)]
     Bus(#[from] BusError),
 }
@@ -80,6 +82,16 @@ pub fn open_bus(path: &Path, config: BusConfig) -> Result<ServoBus, ArmError> {
         source,
     })?;
     Ok(ServoBus::new(transport, config))
+}
+
+/// Torque off on every servo that can hear the port, without knowing or asking them: opens the
+/// port and broadcasts Torque_Enable = 0 (twice, nobody acknowledges a broadcast). For the way
+/// out when the arm is not connected properly.
+pub fn broadcast_torque_off(path: &Path, config: BusConfig) -> Result<(), ArmError> {
+    let mut bus = open_bus(path, config)?;
+    bus.broadcast_write(registers::TORQUE_ENABLE, 0)?;
+    bus.broadcast_write(registers::TORQUE_ENABLE, 0)?;
+    Ok(())
 }
 
 /// Pings servo `id` and reads its model and firmware.
@@ -154,8 +166,8 @@ impl Arm {
 
     /// Reconnects after the adapter came back, without touching torque: the servos kept their
     /// power, so an arm holding a pose keeps holding it. Settings that live in RAM are rewritten
-    /// (a power cycle resets them); an EPROM calibration that differs means these are not the
-    /// servos we knew, so they are configured from scratch (torque off).
+    /// (a power cycle resets them). An EPROM calibration that differs means these are not the
+    /// servos we knew: refused, never overwritten behind the user's back.
     pub fn reattach(
         port: &Path,
         settings: &ArmSettings,

@@ -232,7 +232,8 @@ impl ArmCalibration {
     }
 }
 
-fn validate_motor(name: &str, motor: &MotorCalibration) -> Result<(), String> {
+/// Checks one motor's entry against what the servos can hold.
+pub fn validate_motor(name: &str, motor: &MotorCalibration) -> Result<(), String> {
     if motor.id == 0 || motor.id > MAX_ID {
         return Err(format!("{name}: id {} is not 1..={MAX_ID}", motor.id));
     }

@@ -106,14 +106,14 @@ pub struct RunArgs {
     #[arg(long, default_value = "200", value_parser = parse_rate)]
     pub rate: CycleRate,
     /// Reads per second of velocity, load, voltage, temperature and current.
-    #[arg(long, default_value_t = 10.0, value_parser = parse_positive)]
+    #[arg(long, default_value_t = 10.0, value_parser = parse_telemetry_rate)]
     pub telemetry_rate: f64,
     /// Largest distance (rad) a goal may be from the joint's present position (like LeRobot's
     /// max_relative_target); bigger jumps are approached over several cycles.
     #[arg(long, default_value_t = 0.1, value_parser = parse_positive)]
     pub max_step: f64,
     /// Seconds without a command after which the arm holds where it is; 0 turns the watchdog off.
-    #[arg(long, default_value_t = 0.5, value_parser = parse_non_negative)]
+    #[arg(long, default_value_t = 0.5, value_parser = parse_seconds)]
     pub command_timeout: f64,
     /// Max_Torque_Limit of the gripper, of 1000 (LeRobot's 500 keeps it from overheating).
     #[arg(long, default_value_t = 500, value_parser = clap::value_parser!(i32).range(1..=1000))]
@@ -125,10 +125,11 @@ pub struct RunArgs {
     #[arg(long)]
     pub keep_torque_on_exit: bool,
     /// Seconds between reconnection attempts after the bus was lost.
-    #[arg(long, default_value_t = 0.5, value_parser = parse_positive)]
+    #[arg(long, default_value_t = 0.5, value_parser = parse_interval)]
     pub reconnect_interval: f64,
-    /// Seconds of failed position reads (every servo silent) after which the port is reopened.
-    #[arg(long, default_value_t = 1.0, value_parser = parse_positive)]
+    /// Seconds without a successful position read (any servo silent) after which the port is
+    /// closed and the arm reconnected.
+    #[arg(long, default_value_t = 1.0, value_parser = parse_interval)]
     pub reopen_after: f64,
     /// Exit cleanly after this many seconds.
     #[arg(long, value_parser = parse_non_negative)]
@@ -211,6 +212,34 @@ fn parse_non_negative(text: &str) -> Result<f64, String> {
     match text.parse::<f64>() {
         Ok(value) if value.is_finite() && (0.0..=1e9).contains(&value) => Ok(value),
         _ => Err(format!("{text:?} is not a number from 0 to 1e9")),
+    }
+}
+
+/// A timeout of the node: 0 to an hour.
+fn parse_seconds(text: &str) -> Result<f64, String> {
+    match text.parse::<f64>() {
+        Ok(value) if value.is_finite() && (0.0..=3600.0).contains(&value) => Ok(value),
+        _ => Err(format!(
+            "{text:?} is not a number of seconds from 0 to 3600"
+        )),
+    }
+}
+
+/// An interval of the node: 1 ms to an hour.
+fn parse_interval(text: &str) -> Result<f64, String> {
+    parse_seconds(text).and_then(|value| {
+        if value >= 0.001 {
+            Ok(value)
+        } else {
+            Err(format!("{text:?} is shorter than 1 ms"))
+        }
+    })
+}
+
+fn parse_telemetry_rate(text: &str) -> Result<f64, String> {
+    match text.parse::<f64>() {
+        Ok(value) if value.is_finite() && (0.01..=1000.0).contains(&value) => Ok(value),
+        _ => Err(format!("{text:?} is not a rate from 0.01 to 1000 Hz")),
     }
 }
 

@@ -366,19 +366,28 @@ fn setup_motors_gives_each_factory_servo_its_id_one_at_a_time() {
         plugged: Some(vec![true, false]),
         ..EmulatorConfig::default()
     });
-    let mut bus = open_bus(&bench.link, probe_config(settings(0).bus)).unwrap();
-    assert_eq!(assign(&mut bus, 6, 1_000_000).unwrap(), 1);
+    let config = settings(0).bus;
+    assert_eq!(assign(&bench.link, config, 6, 1_000_000).unwrap(), 1);
     control(&bench, "unplug 0");
     control(&bench, "plug 1");
-    assert_eq!(assign(&mut bus, 5, 1_000_000).unwrap(), 1);
+    assert_eq!(assign(&bench.link, config, 5, 1_000_000).unwrap(), 1);
     let ids: Vec<u8> = bench.emulator.snapshot().iter().map(|s| s.id).collect();
     assert_eq!(ids, [6, 5]);
+    assert!(bench.emulator.snapshot().iter().all(|s| s.lock == 1));
     control(&bench, "plug 0");
+    let mut bus = open_bus(&bench.link, probe_config(config)).unwrap();
     let found = find_servos(&mut bus, 10).unwrap();
     assert_eq!(found.iter().map(|s| s.id).collect::<Vec<_>>(), [5, 6]);
+    drop(bus);
     assert!(matches!(
-        assign(&mut bus, 4, 1_000_000),
+        assign(&bench.link, config, 4, 1_000_000),
         Err(SetupError::SeveralServos(2, _))
+    ));
+    control(&bench, "unplug 0");
+    control(&bench, "unplug 1");
+    assert!(matches!(
+        assign(&bench.link, config, 4, 1_000_000),
+        Err(SetupError::NoServo)
     ));
 }
 

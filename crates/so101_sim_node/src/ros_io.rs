@@ -10,7 +10,12 @@ use std::{
 use ros2_client::{Publisher, Server};
 use so101_core::{
     robot::JOINT_NAMES,
-    ros::{node::NodeError, qos, rate_limit::RateLimiter, RosNode},
+    ros::{
+        node::{spawn_publisher_thread, NodeError},
+        qos,
+        rate_limit::RateLimiter,
+        RosNode,
+    },
 };
 use so101_msgs::{
     builtin_interfaces::Time,
@@ -83,12 +88,7 @@ impl FramePublisher {
             diagnostics: node.publisher("diagnostics", topic)?,
         };
         let (sender, receiver) = sync_channel(BATCH_QUEUE);
-        let thread = std::thread::Builder::new()
-            .name("publisher".into())
-            .spawn(move || publish_frames(&publishers, &receiver))
-            .map_err(|error| {
-                NodeError::Other(format!("cannot start the publisher thread: {error}"))
-            })?;
+        let thread = spawn_publisher_thread(move || publish_frames(&publishers, &receiver))?;
         Ok(Self {
             sender: Some(sender),
             thread: Some(thread),

@@ -153,3 +153,14 @@ impl RosNode {
             })
     }
 }
+
+/// Starts a node's publishing thread: publishing on its own thread keeps a slow DDS write from
+/// delaying a control loop.
+pub fn spawn_publisher_thread(
+    work: impl FnOnce() + Send + 'static,
+) -> Result<std::thread::JoinHandle<()>, NodeError> {
+    std::thread::Builder::new()
+        .name("publisher".into())
+        .spawn(work)
+        .map_err(|error| NodeError::Other(format!("cannot start the publisher thread: {error}")))
+}

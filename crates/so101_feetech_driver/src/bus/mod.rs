@@ -21,6 +21,9 @@ use crate::protocol::{
     Instruction, PacketReader, ProtocolError, ServoErrors, BROADCAST_ID,
 };
 
+/// Reads of stale bytes before a transaction, at most (each up to the buffer size).
+const MAX_STALE_READS: usize = 8;
+
 /// How the bus is driven.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct BusConfig {
@@ -206,6 +209,17 @@ impl<T: Transport> ServoBus<T> {
         Ok(())
     }
 
+    /// Writes one register on every servo at once (broadcast id; nobody answers). The last resort
+    /// when the servos do not answer one by one, e.g. torque off on the way out.
+    pub fn broadcast_write(&mut self, register: Register, value: i32) -> Result<(), BusError> {
+        let instruction = Instruction::Write {
+            address: register.address,
+            data: register.encode(value)?,
+        };
+        self.transact("WRITE", BROADCAST_ID, &instruction, &[], 0)?;
+        Ok(())
+    }
+
     /// One SYNC_READ; answers in `ids` order.
     pub fn sync_read(
         &mut self,
@@ -364,9 +378,11 @@ impl<T: Transport> ServoBus<T> {
         }
     }
 
-    /// Drops whatever arrived since the last transaction (the tail of a late answer, noise).
+    /// Drops whatever arrived since the last transaction (the tail of a late answer, noise). Bounded:
+    /// a line that chatters without end (a floating RX, a device at another baud) must not hold
+    /// the cycle; what is left is dropped by the reader as garbage.
     fn drop_stale_bytes(&mut self) -> Result<(), BusError> {
-        loop {
+        for _ in 0..MAX_STALE_READS {
             let count = self
                 .transport
                 .read_until(&mut self.buffer[..], Instant::now())

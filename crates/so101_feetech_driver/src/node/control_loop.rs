@@ -26,10 +26,11 @@ use super::{
     ros_io::{Output, Outputs, TorqueService},
 };
 use crate::{
-    arm::{Arm, ArmSettings, Telemetry},
+    arm::{broadcast_torque_off, Arm, ArmSettings, Telemetry},
     bus::{usb_latency_timer_ms, BusError, BusStats},
     calibration::{ArmCalibration, ArmRole},
     cli::RunArgs,
+    protocol::ServoErrors,
     safety::{GoalShaper, SafetyConfig, SafetyCounters},
 };
 
@@ -38,6 +39,13 @@ const DIAGNOSTICS_PERIOD: Duration = Duration::from_secs(1);
 const MAX_SLEEP: Duration = Duration::from_millis(50);
 /// Telemetry older than this is not used for joint velocities.
 const TELEMETRY_MAX_AGE: Duration = Duration::from_millis(500);
+/// How often a torque state that does not match the wish is retried.
+const TORQUE_RETRY: Duration = Duration::from_millis(500);
+/// A position further than this outside its calibrated range (ticks, ~18 degrees) is not a joint
+/// pushed by hand but a wrong calibration or a bad reading: no goal is computed from it.
+const IMPLAUSIBLE_MARGIN_TICKS: i32 = 200;
+/// While disconnected at --rate max, how long the loop rests between looks.
+const DISCONNECTED_REST: Duration = Duration::from_millis(5);
 
 /// Runs the driver until a signal or --duration.
 pub fn run(args: RunArgs) -> Result<()> {
@@ -101,6 +109,8 @@ pub fn run(args: RunArgs) -> Result<()> {
     let mut driver = Driver {
         torque_wanted: !leader && !args.start_torque_off,
         torque_on: false,
+        torque_uncertain: false,
+        next_torque_attempt: now,
         leader,
         node_name: node_name.to_owned(),
         port: args.port.port.clone(),
@@ -128,9 +138,12 @@ pub fn run(args: RunArgs) -> Result<()> {
         args,
         _node: node,
     };
-    driver
-        .apply_torque_wish()
-        .context("cannot set the servos' torque at start")?;
+    if let Err(error) = driver.apply_torque_wish() {
+        // Some servos may have taken torque on before the failure: none may stay stiff.
+        driver.torque_wanted = false;
+        driver.torque_off_on_exit();
+        return Err(error).context("cannot set the servos' torque at start");
+    }
     let summary = driver.run(&shutdown);
     driver.finish(summary)
 }
@@ -151,8 +164,11 @@ struct Driver {
     shaper: GoalShaper,
     /// What the user asked for (start-up flag, service); restored after a reconnect.
     torque_wanted: bool,
-    /// What the servos were last told.
+    /// Torque is on and confirmed by every servo: only then are goals written.
     torque_on: bool,
+    /// A torque change failed part-way: the servos' state is not known until a retry succeeds.
+    torque_uncertain: bool,
+    next_torque_attempt: Instant,
     outputs: Outputs,
     inbox: Option<CommandInbox>,
     torque_service: TorqueService,
@@ -215,9 +231,13 @@ impl Driver {
         self.serve_torque_requests();
         if matches!(self.link, Link::Down { .. }) {
             self.try_reconnect(now);
+            if self.args.rate.period().is_none() && matches!(self.link, Link::Down { .. }) {
+                std::thread::sleep(DISCONNECTED_REST);
+            }
         } else {
+            self.reconcile_torque(now);
             self.exchange(now);
-            if now >= self.next_telemetry {
+            if now >= self.next_telemetry && self.present.is_some() {
                 self.next_telemetry = now + Duration::from_secs_f64(1.0 / self.args.telemetry_rate);
                 self.read_telemetry(now);
             }
@@ -242,6 +262,15 @@ impl Driver {
                 return;
             }
         };
+        if let Some(problem) = Self::implausible(&self.calibration, &ticks, arm) {
+            self.failed_cycles += 1;
+            self.present = None;
+            if self.problem.as_deref() != Some(problem.as_str()) {
+                tracing::error!("{problem}");
+            }
+            self.problem = Some(problem);
+            return;
+        }
         let positions: JointPositions =
             std::array::from_fn(|joint| self.calibration.radians_from_ticks(joint, ticks[joint]));
         self.last_good_read = now;
@@ -260,6 +289,44 @@ impl Driver {
             }
         }
         self.publish_joints(&positions, now);
+    }
+
+    /// Why these readings must not be acted on, if they must not: far outside the calibrated
+    /// range, or from a servo that reports its angle sensor failing.
+    fn implausible(
+        calibration: &ArmCalibration,
+        ticks: &[i32; JOINT_COUNT],
+        arm: &Arm,
+    ) -> Option<String> {
+        for (joint, (&tick, motor)) in ticks.iter().zip(&calibration.motors).enumerate() {
+            if arm.bus.servo_errors(motor.id).0 & ServoErrors::ANGLE_SENSOR != 0 {
+                return Some(format!(
+                    "{} (id {}) reports an angle sensor error: goals withheld",
+                    JOINT_NAMES[joint], motor.id
+                ));
+            }
+            let low = motor.range_min - IMPLAUSIBLE_MARGIN_TICKS;
+            let high = motor.range_max + IMPLAUSIBLE_MARGIN_TICKS;
+            if !(low..=high).contains(&tick) {
+                return Some(format!(
+                    "{} (id {}) reads {tick} ticks, far outside its calibrated range {}..{}: wrong calibration file? Goals withheld",
+                    JOINT_NAMES[joint], motor.id, motor.range_min, motor.range_max
+                ));
+            }
+        }
+        None
+    }
+
+    /// Retries a torque state that does not match the wish (a failed change, a reconnect).
+    fn reconcile_torque(&mut self, now: Instant) {
+        let matches = self.torque_on == self.torque_wanted && !self.torque_uncertain;
+        if matches || now < self.next_torque_attempt {
+            return;
+        }
+        self.next_torque_attempt = now + TORQUE_RETRY;
+        if self.apply_torque_wish().is_ok() {
+            tracing::info!(on = self.torque_on, "torque state restored");
+        }
     }
 
     fn read_telemetry(&mut self, now: Instant) {
@@ -309,16 +376,33 @@ impl Driver {
             } else {
                 self.torque_wanted = on;
                 match &self.link {
+                    Link::Down { .. } if !on => {
+                        match broadcast_torque_off(&self.port, self.settings.bus) {
+                            Ok(()) => (
+                                true,
+                                "the arm is disconnected: torque off was broadcast (unconfirmed)"
+                                    .to_owned(),
+                            ),
+                            Err(error) => (
+                                false,
+                                format!(
+                                "the arm is disconnected and torque off could not be sent: {error}"
+                            ),
+                            ),
+                        }
+                    }
                     Link::Down { .. } => (
                         false,
-                        format!(
-                            "the arm is disconnected; torque will be {} once it is back",
-                            if on { "on" } else { "off" }
-                        ),
+                        "the arm is disconnected; torque will be on once it is back".to_owned(),
                     ),
                     Link::Up(_) => match self.apply_torque_wish() {
                         Ok(()) => (true, format!("torque {}", if on { "on" } else { "off" })),
-                        Err(error) => (false, format!("torque change failed: {error}")),
+                        Err(error) => (
+                            false,
+                            format!(
+                                "torque change failed ({error}); retrying every {TORQUE_RETRY:?}"
+                            ),
+                        ),
                     },
                 }
             };
@@ -329,29 +413,43 @@ impl Driver {
 
     /// Brings the servos' torque in line with `torque_wanted`. Turning it on first makes the
     /// present position the goal, so the arm does not jump to an old one.
-    fn apply_torque_wish(&mut self) -> Result<(), BusError> {
+    fn apply_torque_wish(&mut self) -> Result<(), TorqueError> {
         let Link::Up(arm) = &mut self.link else {
             return Ok(());
         };
         let result = if self.torque_wanted {
-            arm.read_positions().and_then(|ticks| {
-                let present: JointPositions = std::array::from_fn(|joint| {
-                    self.calibration.radians_from_ticks(joint, ticks[joint])
-                });
-                self.shaper.hold(&present);
-                let held = self.shaper.targets().copied().unwrap_or(present);
-                let goals = std::array::from_fn(|joint| {
-                    self.calibration.ticks_from_radians(joint, held[joint])
-                });
-                arm.write_goals(&goals)?;
-                arm.set_torque(true)
-            })
+            let calibration = &self.calibration;
+            arm.read_positions()
+                .map_err(TorqueError::from)
+                .and_then(|ticks| match Self::implausible(calibration, &ticks, arm) {
+                    Some(problem) => Err(TorqueError::Implausible(problem)),
+                    None => Ok(ticks),
+                })
+                .and_then(|ticks| {
+                    let present: JointPositions = std::array::from_fn(|joint| {
+                        self.calibration.radians_from_ticks(joint, ticks[joint])
+                    });
+                    self.shaper.hold(&present);
+                    let held = self.shaper.targets().copied().unwrap_or(present);
+                    let goals = std::array::from_fn(|joint| {
+                        self.calibration.ticks_from_radians(joint, held[joint])
+                    });
+                    arm.write_goals(&goals)?;
+                    Ok(arm.set_torque(true)?)
+                })
         } else {
-            arm.set_torque(false)
+            arm.set_torque(false).map_err(TorqueError::from)
         };
         match &result {
-            Ok(()) => self.torque_on = self.torque_wanted,
+            Ok(()) => {
+                self.torque_on = self.torque_wanted;
+                self.torque_uncertain = false;
+            }
             Err(error) => {
+                // Some servos may have switched: no goals until a retry confirms all of them.
+                self.torque_on = false;
+                self.torque_uncertain = true;
+                self.problem = Some(format!("torque change failed: {error}"));
                 tracing::error!(%error, wanted = self.torque_wanted, "cannot change torque");
             }
         }
@@ -391,7 +489,9 @@ impl Driver {
         self.link = Link::Down { next_attempt: now };
         self.problem = Some(problem);
         self.present = None;
+        // Unknown until the servos answer again; reconcile_torque restores the wish then.
         self.torque_on = false;
+        self.torque_uncertain = true;
         self.answering = [false; JOINT_COUNT];
     }
 
@@ -409,7 +509,8 @@ impl Driver {
                 self.last_good_read = now;
                 self.problem = None;
                 tracing::info!(reconnects = self.reconnects, "bus reconnected");
-                let _ = self.apply_torque_wish();
+                self.next_torque_attempt = now;
+                self.reconcile_torque(now);
             }
             Err(error) => {
                 self.link = Link::Down {
@@ -472,7 +573,7 @@ impl Driver {
                 crate::cli::CycleRate::Max => None,
             },
             cycles: self.stats.cycles(),
-            lateness_p99_us: self.stats.summary(Instant::now()).lateness_p99_us,
+            lateness_p99_us: self.stats.recent_lateness_p99_us(),
             overruns: self.stats.overruns,
             failed_cycles: self.failed_cycles,
             reconnects: self.reconnects,
@@ -502,15 +603,24 @@ impl Driver {
         }));
     }
 
+    /// Torque off on every servo that can hear it: acknowledged one by one when the arm is
+    /// connected, broadcast when it is not (it may be half there).
+    fn torque_off_on_exit(&mut self) {
+        let result = match &mut self.link {
+            Link::Up(arm) => arm.set_torque(false).map_err(|error| error.to_string()),
+            Link::Down { .. } => broadcast_torque_off(&self.port, self.settings.bus)
+                .map_err(|error| error.to_string()),
+        };
+        match result {
+            Ok(()) => tracing::info!("torque off"),
+            Err(error) => tracing::error!(%error, "could not confirm torque off on exit"),
+        }
+    }
+
     /// Torque off (unless asked to keep it), then the exit summary.
     fn finish(mut self, cycles: CycleSummary) -> Result<()> {
         if !self.args.keep_torque_on_exit && !self.leader {
-            if let Link::Up(arm) = &mut self.link {
-                match arm.set_torque(false) {
-                    Ok(()) => tracing::info!("torque off"),
-                    Err(error) => tracing::error!(%error, "could not turn torque off on exit"),
-                }
-            }
+            self.torque_off_on_exit();
         }
         let cpu = cpu_time().saturating_sub(self.started_cpu);
         let report = self.report();
@@ -544,6 +654,14 @@ impl Driver {
         }
         Ok(())
     }
+}
+
+#[derive(Debug, thiserror::Error)]
+enum TorqueError {
+    #[error(transparent)]
+    Bus(#[from] BusError),
+    #[error("{0}")]
+    Implausible(String),
 }
 
 /// The exit summary (--stats-json): what the benchmark reads.

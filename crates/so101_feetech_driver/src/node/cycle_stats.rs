@@ -18,6 +18,10 @@ pub struct CycleStats {
     pub overruns: u64,
     window: (Instant, u64),
     recent_rate: f64,
+    /// Lateness of the cycles of the current window, and the p99 of the last full one: what
+    /// /diagnostics shows without sorting the whole history on the control thread.
+    window_lateness_us: Vec<u32>,
+    recent_lateness_p99_us: u32,
 }
 
 /// What the exit summary and the benchmark report.
@@ -45,16 +49,21 @@ impl CycleStats {
             overruns: 0,
             window: (now, 0),
             recent_rate: 0.0,
+            window_lateness_us: Vec::new(),
+            recent_lateness_p99_us: 0,
         }
     }
 
     /// Records a cycle that started at `now` and was due at `scheduled` (none when running flat out).
     pub fn record_start(&mut self, now: Instant, scheduled: Option<Instant>) {
         self.cycles += 1;
+        let lateness = scheduled.map(|due| micros(now.saturating_duration_since(due)));
+        if let Some(lateness) = lateness {
+            self.window_lateness_us.push(lateness);
+        }
         if self.lateness_us.len() < MAX_SAMPLES {
-            if let Some(due) = scheduled {
-                self.lateness_us
-                    .push(micros(now.saturating_duration_since(due)));
+            if let Some(lateness) = lateness {
+                self.lateness_us.push(lateness);
             }
             if let Some(last) = self.last_start {
                 self.periods_us.push(micros(now.duration_since(last)));
@@ -66,12 +75,20 @@ impl CycleStats {
         if elapsed >= Duration::from_secs(1) {
             self.recent_rate = (self.cycles - window_cycles) as f64 / elapsed.as_secs_f64();
             self.window = (now, self.cycles);
+            self.window_lateness_us.sort_unstable();
+            self.recent_lateness_p99_us = percentile(&self.window_lateness_us, 0.99);
+            self.window_lateness_us.clear();
         }
     }
 
     /// Cycles per second over the last second or so.
     pub fn recent_rate(&self) -> f64 {
         self.recent_rate
+    }
+
+    /// p99 of the cycle start lateness over the last second or so.
+    pub fn recent_lateness_p99_us(&self) -> u32 {
+        self.recent_lateness_p99_us
     }
 
     pub fn cycles(&self) -> u64 {

@@ -8,7 +8,12 @@ use std::{
 };
 
 use ros2_client::{Publisher, RmwRequestId, Server};
-use so101_core::ros::{node::NodeError, qos, rate_limit::RateLimiter, RosNode};
+use so101_core::ros::{
+    node::{spawn_publisher_thread, NodeError},
+    qos,
+    rate_limit::RateLimiter,
+    RosNode,
+};
 use so101_msgs::{
     diagnostic_msgs::DiagnosticArray,
     sensor_msgs::JointState,
@@ -38,12 +43,7 @@ impl Outputs {
         let diagnostics: Publisher<DiagnosticArray> =
             node.publisher("diagnostics", qos::default_topic())?;
         let (sender, receiver) = sync_channel(QUEUE);
-        let thread = std::thread::Builder::new()
-            .name("publisher".into())
-            .spawn(move || publish(&joints, &diagnostics, &receiver))
-            .map_err(|error| {
-                NodeError::Other(format!("cannot start the publisher thread: {error}"))
-            })?;
+        let thread = spawn_publisher_thread(move || publish(&joints, &diagnostics, &receiver))?;
         Ok(Self {
             sender: Some(sender),
             thread: Some(thread),

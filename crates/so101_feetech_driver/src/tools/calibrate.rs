@@ -15,7 +15,7 @@ use so101_core::robot::{JOINT_COUNT, JOINT_NAMES};
 use crate::{
     arm::{open_bus, write_motor_calibration},
     bus::{BusError, ServoBus},
-    calibration::{ArmCalibration, MotorCalibration, MAX_HOMING_OFFSET, MAX_TICKS},
+    calibration::{validate_motor, ArmCalibration, MotorCalibration, MAX_HOMING_OFFSET, MAX_TICKS},
     cli::CalibrateArgs,
     protocol::registers,
 };
@@ -23,6 +23,8 @@ use crate::{
 /// Tick value of the centred pose (half a turn).
 const HALF_TURN: i32 = 2047;
 const WRIST_ROLL: usize = 4;
+/// Failed reads in a row after which the sweep gives up (about a second).
+const MAX_FAILED_SAMPLES: u32 = 50;
 /// A sweep smaller than this (ticks, ~9 degrees) is most likely a joint the user forgot.
 const MIN_SWEEP: i32 = 100;
 
@@ -40,6 +42,8 @@ pub enum CalibrateError {
         min: i32,
         max: i32,
     },
+    #[error("the calibration would not be valid: {0}")]
+    Invalid(String),
     #[error(transparent)]
     Bus(#[from] BusError),
 }
@@ -129,7 +133,7 @@ impl<'a> Calibration<'a> {
         for joint in 0..JOINT_COUNT {
             let (range_min, range_max) = if joint == WRIST_ROLL {
                 (0, MAX_TICKS)
-            } else if self.max[joint] - self.min[joint] < MIN_SWEEP {
+            } else if self.max[joint].saturating_sub(self.min[joint]) < MIN_SWEEP {
                 return Err(CalibrateError::NoSweep {
                     joint: JOINT_NAMES[joint],
                     min: self.min[joint],
@@ -145,6 +149,10 @@ impl<'a> Calibration<'a> {
                 range_min,
                 range_max,
             };
+        }
+        // Everything is checked before the first EPROM write: all servos or none.
+        for (name, motor) in JOINT_NAMES.iter().zip(&motors) {
+            validate_motor(name, motor).map_err(CalibrateError::Invalid)?;
         }
         for motor in &motors {
             write_motor_calibration(self.bus, motor)?;
@@ -174,14 +182,27 @@ pub fn run(args: &CalibrateArgs) -> Result<()> {
     );
     let enter = enter_pressed();
     let mut last_print = Instant::now() - Duration::from_secs(1);
+    let mut failures_in_a_row = 0;
     loop {
-        let positions = calibration.sample()?;
+        // One lost answer must not throw the sweep away; a bus that stays silent ends it.
+        match calibration.sample() {
+            Ok(positions) => {
+                failures_in_a_row = 0;
+                if last_print.elapsed() >= Duration::from_millis(200) {
+                    last_print = Instant::now();
+                    print_sweep(&positions, calibration.ranges());
+                }
+            }
+            Err(error) => {
+                failures_in_a_row += 1;
+                tracing::warn!(%error, "a read during the sweep failed");
+                if failures_in_a_row >= MAX_FAILED_SAMPLES {
+                    return Err(error.into());
+                }
+            }
+        }
         if enter.try_recv().is_ok() {
             break;
-        }
-        if last_print.elapsed() >= Duration::from_millis(200) {
-            last_print = Instant::now();
-            print_sweep(&positions, calibration.ranges());
         }
         std::thread::sleep(Duration::from_millis(10));
     }

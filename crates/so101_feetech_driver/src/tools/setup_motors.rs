@@ -1,55 +1,94 @@
-//! Motor set-up like LeRobot's: new servos all answer to id 1, so each is connected alone, found,
-//! and given its joint's id and the bus baud rate. Gripper first, down to shoulder_pan.
+//! Motor set-up like LeRobot's: new servos all answer to id 1, so each is connected alone, found at
+//! whatever baud rate it speaks, and given its joint's id and the bus baud rate. Gripper first,
+//! down to shoulder_pan.
+
+use std::path::Path;
 
 use anyhow::{bail, Context, Result};
 use so101_core::robot::{joint_index, JOINT_NAMES};
 
-use super::scan::{baud_index, find_servos, probe_config};
+use super::scan::{baud_index, find_servos, probe_config, BAUD_RATES};
 use crate::{
-    arm::open_bus,
-    bus::{BusError, ServoBus},
+    arm::{open_bus, ArmError},
+    bus::{BusConfig, BusError, ServoBus},
     cli::SetupMotorsArgs,
-    protocol::registers,
+    protocol::{registers, MAX_ID},
 };
 
 #[derive(Debug, thiserror::Error)]
 pub enum SetupError {
-    #[error("no servo answers on the bus: is exactly one connected and powered?")]
+    #[error("no servo answers at any baud rate: is exactly one connected and powered?")]
     NoServo,
     #[error("{0} servos answer (ids {1:?}): connect only the one to set up")]
     SeveralServos(usize, Vec<u8>),
+    #[error("servo id {id} is model {model}, not an STS3215 (777)")]
+    WrongModel { id: u8, model: i32 },
     #[error("the bus baud rate {0} is not one the servos support")]
     UnsupportedBaud(u32),
+    #[error(transparent)]
+    Open(#[from] ArmError),
     #[error(transparent)]
     Bus(#[from] BusError),
 }
 
-/// Gives the only servo on the bus `new_id` and the bus baud rate; returns its old id.
-pub fn assign(bus: &mut ServoBus, new_id: u8, baud: u32) -> Result<u8, SetupError> {
-    let index = baud_index(baud).ok_or(SetupError::UnsupportedBaud(baud))?;
-    let servos = find_servos(bus, crate::protocol::MAX_ID)?;
-    let old = match servos.as_slice() {
-        [] => return Err(SetupError::NoServo),
-        [only] => only.id,
-        many => {
-            return Err(SetupError::SeveralServos(
-                many.len(),
-                many.iter().map(|servo| servo.id).collect(),
-            ))
+/// Finds the only servo on the bus (trying `target_baud` first, then every rate the servos
+/// support), gives it `new_id` and `target_baud`, and checks it answers there. Returns its old id.
+pub fn assign(
+    port: &Path,
+    config: BusConfig,
+    new_id: u8,
+    target_baud: u32,
+) -> Result<u8, SetupError> {
+    let target_index = baud_index(target_baud).ok_or(SetupError::UnsupportedBaud(target_baud))?;
+    let open = |baud: u32| open_bus(port, probe_config(BusConfig { baud, ..config }));
+    let bauds = std::iter::once(target_baud).chain(
+        BAUD_RATES
+            .iter()
+            .map(|(_, baud)| *baud)
+            .filter(|b| *b != target_baud),
+    );
+    let mut found = None;
+    for baud in bauds {
+        let mut bus = open(baud)?;
+        match find_servos(&mut bus, MAX_ID)?.as_slice() {
+            [] => continue,
+            [only] => {
+                found = Some((bus, baud, *only));
+                break;
+            }
+            many => {
+                return Err(SetupError::SeveralServos(
+                    many.len(),
+                    many.iter().map(|servo| servo.id).collect(),
+                ))
+            }
         }
-    };
-    bus.write(old, registers::TORQUE_ENABLE, 0)?;
-    bus.write(old, registers::LOCK, 0)?;
-    if old != new_id {
-        bus.write_unacknowledged(old, registers::ID, i32::from(new_id))?;
+    }
+    let (mut bus, baud, servo) = found.ok_or(SetupError::NoServo)?;
+    if servo.model != i32::from(registers::STS3215_MODEL) {
+        return Err(SetupError::WrongModel {
+            id: servo.id,
+            model: servo.model,
+        });
+    }
+    bus.write(servo.id, registers::TORQUE_ENABLE, 0)?;
+    bus.write(servo.id, registers::LOCK, 0)?;
+    if servo.id != new_id {
+        bus.write_unacknowledged(servo.id, registers::ID, i32::from(new_id))?;
         bus.ping(new_id)?;
     }
-    if bus.read(new_id, registers::BAUD_RATE)? != index {
-        // Takes effect at once: the servo answers at the new rate from here on.
-        bus.write_unacknowledged(new_id, registers::BAUD_RATE, index)?;
-    }
+    let mut bus: ServoBus = if baud != target_baud {
+        // Takes effect at once: from here on the servo speaks the new rate.
+        bus.write_unacknowledged(new_id, registers::BAUD_RATE, target_index)?;
+        drop(bus);
+        let mut bus = open(target_baud)?;
+        bus.ping(new_id)?;
+        bus
+    } else {
+        bus
+    };
     bus.write(new_id, registers::LOCK, 1)?;
-    Ok(old)
+    Ok(servo.id)
 }
 
 pub fn run(args: &SetupMotorsArgs) -> Result<()> {
@@ -70,8 +109,7 @@ pub fn run(args: &SetupMotorsArgs) -> Result<()> {
         super::wait_for_enter(&format!(
             "Connect the controller board to the '{name}' servo ONLY, then press Enter."
         ))?;
-        let mut bus = open_bus(&args.port.port, probe_config(args.port.bus_config()))?;
-        match assign(&mut bus, id, args.port.baud) {
+        match assign(&args.port.port, args.port.bus_config(), id, args.port.baud) {
             Ok(old) => println!("'{name}' servo: id {old} -> {id}, baud {}", args.port.baud),
             Err(error) => bail!("'{name}' servo: {error}"),
         }
