@@ -43,7 +43,7 @@ pub struct RosNode {
     node: Node,
     names: Names,
     // Kept so the participant outlives the node.
-    _context: Context,
+    context: Context,
 }
 
 impl RosNode {
@@ -73,7 +73,7 @@ impl RosNode {
         Ok(Self {
             node,
             names,
-            _context: context,
+            context,
         })
     }
 
@@ -83,6 +83,11 @@ impl RosNode {
 
     pub fn node(&self) -> &Node {
         &self.node
+    }
+
+    /// The ROS context (its DDS participant), for nodes that need DDS directly (raw readers).
+    pub fn context(&self) -> &Context {
+        &self.context
     }
 
     /// A publisher of `T` on `relative` (resolved in the namespace).

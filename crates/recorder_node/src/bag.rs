@@ -1,0 +1,596 @@
+//! Writing episodes as rosbag2 MCAP bags: one directory per episode with its .mcap file(s) and
+//! metadata.yaml, split by size or duration, chunked and optionally compressed.
+//!
+//! Crash safety: the MCAP writer sits directly on the file (no user-space buffer), and a chunk
+//! that has been open for `max_chunk_age` is closed, so after a SIGKILL every closed chunk is on
+//! disk and at most that much is lost. A failing write (a full disk) ends the episode's file: the
+//! error is reported once, the file is closed as far as it can be, and later messages of the
+//! episode are counted as dropped.
+
+use std::{
+    collections::{BTreeMap, HashMap},
+    fs::File,
+    path::{Path, PathBuf},
+    time::{Duration, Instant},
+};
+
+use mcap::{records::MessageHeader, Compression, WriteOptions, Writer};
+
+use crate::{
+    episodes::{EpisodeInfo, StartOptions},
+    metadata::{metadata_yaml, BagSummary, FileSummary, QosSummary, TopicSummary},
+};
+
+/// How bags are written.
+#[derive(Debug, Clone)]
+pub struct BagOptions {
+    pub output: PathBuf,
+    /// Episode directories are `<prefix>_<index, 6 digits>`.
+    pub prefix: String,
+    pub compression: Option<Compression>,
+    pub chunk_size: u64,
+    pub max_chunk_age: Duration,
+    pub split_size: Option<u64>,
+    pub split_duration: Option<Duration>,
+    /// Task text of episodes whose start does not name one.
+    pub default_task: String,
+}
+
+/// A topic as recorded: name, type, schema text and QoS.
+#[derive(Debug, Clone)]
+pub struct TopicInfo {
+    pub name: String,
+    pub type_name: String,
+    pub schema: String,
+    pub qos: QosSummary,
+}
+
+/// One received message, for topic number `topic` (the order topics were added in).
+#[derive(Debug, Clone)]
+pub struct Message {
+    pub topic: usize,
+    pub data: Vec<u8>,
+    pub log_ns: u64,
+    pub publish_ns: u64,
+}
+
+#[derive(Debug, thiserror::Error)]
+pub enum BagError {
+    #[error("cannot create {path}: {source}")]
+    Create {
+        path: PathBuf,
+        source: std::io::Error,
+    },
+    #[error("writing {path} failed: {source}")]
+    Mcap {
+        path: PathBuf,
+        source: mcap::McapError,
+    },
+    #[error("cannot write {path}: {source}")]
+    Metadata {
+        path: PathBuf,
+        source: std::io::Error,
+    },
+    #[error("no episode is being recorded")]
+    NotRecording,
+}
+
+struct OpenFile {
+    writer: Writer<File>,
+    path: PathBuf,
+    relative: String,
+    channels: HashMap<usize, u16>,
+    schemas: HashMap<String, u16>,
+    start_ns: Option<u64>,
+    last_ns: u64,
+    count: u64,
+    sequence: u32,
+    chunk_opened: Option<Instant>,
+    since_size_check: u32,
+    size: u64,
+}
+
+struct Episode {
+    info: EpisodeInfo,
+    dir: PathBuf,
+    name: String,
+    file: Option<OpenFile>,
+    files: Vec<FileSummary>,
+    counts: Vec<u64>,
+    first_ns: Option<u64>,
+    last_ns: u64,
+    count: u64,
+    /// Set once a write failed: the rest of the episode is not written.
+    failed: Option<String>,
+}
+
+/// The writing side of the recorder (runs on its own thread, off the receive path).
+pub struct BagWriter {
+    options: BagOptions,
+    topics: Vec<TopicInfo>,
+    next_index: u64,
+    episode: Option<Episode>,
+}
+
+/// Messages between two looks at the file size (split by size).
+const SIZE_CHECK_EVERY: u32 = 64;
+
+impl BagWriter {
+    pub fn new(options: BagOptions) -> Result<Self, BagError> {
+        std::fs::create_dir_all(&options.output).map_err(|source| BagError::Create {
+            path: options.output.clone(),
+            source,
+        })?;
+        let next_index = next_free_index(&options.output, &options.prefix);
+        Ok(Self {
+            options,
+            topics: Vec::new(),
+            next_index,
+            episode: None,
+        })
+    }
+
+    pub fn add_topic(&mut self, topic: TopicInfo) {
+        if let Some(episode) = &mut self.episode {
+            episode.counts.push(0);
+        }
+        self.topics.push(topic);
+    }
+
+    pub fn is_recording(&self) -> bool {
+        self.episode.is_some()
+    }
+
+    /// Starts a new episode (a running one is stopped first). Returns its directory.
+    pub fn start(&mut self, options: StartOptions, now_ns: u64) -> Result<PathBuf, BagError> {
+        if self.episode.is_some() {
+            self.stop(now_ns, None)?;
+        }
+        let index = self.next_index;
+        self.next_index += 1;
+        let name = format!("{}_{index:06}", self.options.prefix);
+        let dir = self.options.output.join(&name);
+        std::fs::create_dir_all(&dir).map_err(|source| BagError::Create {
+            path: dir.clone(),
+            source,
+        })?;
+        let mut episode = Episode {
+            info: EpisodeInfo {
+                index,
+                task: options
+                    .task
+                    .unwrap_or_else(|| self.options.default_task.clone()),
+                seed: options.seed,
+                success: None,
+                start_ns: now_ns,
+                stop_ns: None,
+                dropped: 0,
+            },
+            dir: dir.clone(),
+            name,
+            file: None,
+            files: Vec::new(),
+            counts: vec![0; self.topics.len()],
+            first_ns: None,
+            last_ns: now_ns,
+            count: 0,
+            failed: None,
+        };
+        episode.file = Some(self.open_file(&episode)?);
+        tracing::info!(episode = index, dir = %dir.display(), task = %episode.info.task, "episode started");
+        self.episode = Some(episode);
+        Ok(dir)
+    }
+
+    fn open_file(&self, episode: &Episode) -> Result<OpenFile, BagError> {
+        let relative = format!("{}_{}.mcap", episode.name, episode.files.len());
+        let path = episode.dir.join(&relative);
+        let file = File::create(&path).map_err(|source| BagError::Create {
+            path: path.clone(),
+            source,
+        })?;
+        let writer = WriteOptions::new()
+            .profile("ros2")
+            .library(concat!("so101 recorder_node ", env!("CARGO_PKG_VERSION")))
+            .compression(self.options.compression)
+            .chunk_size(Some(self.options.chunk_size))
+            .create(file)
+            .map_err(|source| BagError::Mcap {
+                path: path.clone(),
+                source,
+            })?;
+        Ok(OpenFile {
+            writer,
+            path,
+            relative,
+            channels: HashMap::new(),
+            schemas: HashMap::new(),
+            start_ns: None,
+            last_ns: 0,
+            count: 0,
+            sequence: 0,
+            chunk_opened: None,
+            since_size_check: 0,
+            size: 0,
+        })
+    }
+
+    /// Writes one message into the running episode; messages outside an episode are not kept.
+    pub fn write(&mut self, message: &Message) {
+        let Some(episode) = self.episode.as_mut() else {
+            return;
+        };
+        if episode.failed.is_some() {
+            episode.info.dropped += 1;
+            return;
+        }
+        if let Err(error) = self.write_in_episode(message) {
+            self.fail(error);
+        }
+    }
+
+    fn write_in_episode(&mut self, message: &Message) -> Result<(), BagError> {
+        self.split_if_due(message.log_ns)?;
+        let topic = &self.topics[message.topic];
+        let Some(episode) = self.episode.as_mut() else {
+            return Ok(());
+        };
+        let Some(file) = episode.file.as_mut() else {
+            return Ok(());
+        };
+        let mcap_error = |path: &Path| {
+            let path = path.to_owned();
+            move |source| BagError::Mcap { path, source }
+        };
+        let channel = match file.channels.get(&message.topic) {
+            Some(channel) => *channel,
+            None => {
+                let schema = match file.schemas.get(&topic.type_name) {
+                    Some(schema) => *schema,
+                    None => {
+                        let id = file
+                            .writer
+                            .add_schema(&topic.type_name, "ros2msg", topic.schema.as_bytes())
+                            .map_err(mcap_error(&file.path))?;
+                        file.schemas.insert(topic.type_name.clone(), id);
+                        id
+                    }
+                };
+                let metadata = BTreeMap::from([
+                    ("offered_qos_profiles".to_owned(), topic.qos.yaml(0)),
+                    ("topic_type_hash".to_owned(), String::new()),
+                ]);
+                let id = file
+                    .writer
+                    .add_channel(schema, &topic.name, "cdr", &metadata)
+                    .map_err(mcap_error(&file.path))?;
+                file.channels.insert(message.topic, id);
+                id
+            }
+        };
+        file.writer
+            .write_to_known_channel(
+                &MessageHeader {
+                    channel_id: channel,
+                    sequence: file.sequence,
+                    log_time: message.log_ns,
+                    publish_time: message.publish_ns,
+                },
+                &message.data,
+            )
+            .map_err(mcap_error(&file.path))?;
+        file.sequence = file.sequence.wrapping_add(1);
+        file.count += 1;
+        file.start_ns.get_or_insert(message.log_ns);
+        file.last_ns = file.last_ns.max(message.log_ns);
+        file.chunk_opened.get_or_insert_with(Instant::now);
+        file.size += message.data.len() as u64;
+        episode.counts[message.topic] += 1;
+        episode.count += 1;
+        episode.first_ns.get_or_insert(message.log_ns);
+        episode.last_ns = episode.last_ns.max(message.log_ns);
+        Ok(())
+    }
+
+    /// Starts the next file of the episode when the current one is over the size or duration.
+    fn split_if_due(&mut self, now_ns: u64) -> Result<(), BagError> {
+        let (split_size, split_duration) = (self.options.split_size, self.options.split_duration);
+        let Some(episode) = self.episode.as_mut() else {
+            return Ok(());
+        };
+        let Some(file) = episode.file.as_mut() else {
+            return Ok(());
+        };
+        file.since_size_check += 1;
+        if split_size.is_some() && file.since_size_check >= SIZE_CHECK_EVERY {
+            file.since_size_check = 0;
+            // The real size (compression makes the message bytes an overestimate).
+            if let Ok(meta) = std::fs::metadata(&file.path) {
+                file.size = meta.len();
+            }
+        }
+        let too_big = split_size.is_some_and(|limit| file.size >= limit);
+        let too_long = split_duration.is_some_and(|limit| {
+            file.start_ns
+                .is_some_and(|start| now_ns.saturating_sub(start) >= limit.as_nanos() as u64)
+        });
+        if !(too_big || too_long) || file.count == 0 {
+            return Ok(());
+        }
+        self.close_file()?;
+        let Some(episode) = self.episode.as_ref() else {
+            return Ok(());
+        };
+        let next = self.open_file(episode)?;
+        tracing::info!(file = %next.path.display(), "bag split");
+        if let Some(episode) = self.episode.as_mut() {
+            episode.file = Some(next);
+        }
+        Ok(())
+    }
+
+    /// Closes the open chunk when it is older than `max_chunk_age` (bounded loss on a crash).
+    pub fn tick(&mut self) {
+        let age = self.options.max_chunk_age;
+        let Some(file) = self.episode.as_mut().and_then(|e| e.file.as_mut()) else {
+            return;
+        };
+        if file
+            .chunk_opened
+            .is_some_and(|opened| opened.elapsed() >= age)
+        {
+            file.chunk_opened = None;
+            if let Err(source) = file.writer.flush() {
+                let path = file.path.clone();
+                self.fail(BagError::Mcap { path, source });
+            }
+        }
+    }
+
+    pub fn mark(&mut self, success: bool) -> Result<u64, BagError> {
+        let episode = self.episode.as_mut().ok_or(BagError::NotRecording)?;
+        episode.info.success = Some(success);
+        Ok(episode.info.index)
+    }
+
+    pub fn add_dropped(&mut self, count: u64) {
+        if let Some(episode) = self.episode.as_mut() {
+            episode.info.dropped += count;
+        }
+    }
+
+    /// Ends the episode: closes its file and writes metadata.yaml. `success_hint` (the last
+    /// /task/success) is used when nobody marked the episode.
+    pub fn stop(
+        &mut self,
+        now_ns: u64,
+        success_hint: Option<bool>,
+    ) -> Result<EpisodeInfo, BagError> {
+        let episode = self.episode.as_mut().ok_or(BagError::NotRecording)?;
+        episode.info.stop_ns = Some(now_ns);
+        if episode.info.success.is_none() {
+            episode.info.success = success_hint;
+        }
+        let closed = self.close_file();
+        let Some(episode) = self.episode.take() else {
+            return Err(BagError::NotRecording);
+        };
+        let metadata = write_metadata_yaml(&episode, &self.topics);
+        tracing::info!(
+            episode = episode.info.index,
+            messages = episode.count,
+            success = ?episode.info.success,
+            dropped = episode.info.dropped,
+            dir = %episode.dir.display(),
+            "episode stopped"
+        );
+        closed.and(metadata).map(|()| episode.info)
+    }
+
+    /// Ends the episode and deletes its directory.
+    pub fn discard(&mut self) -> Result<u64, BagError> {
+        let index = self
+            .episode
+            .as_ref()
+            .ok_or(BagError::NotRecording)?
+            .info
+            .index;
+        let _ = self.close_file();
+        if let Some(episode) = self.episode.take() {
+            let _ = std::fs::remove_dir_all(&episode.dir);
+            tracing::info!(episode = index, "episode discarded");
+        }
+        // The discarded index is used again: numbering stays contiguous.
+        self.next_index = index;
+        Ok(index)
+    }
+
+    fn close_file(&mut self) -> Result<(), BagError> {
+        let Some(episode) = self.episode.as_mut() else {
+            return Ok(());
+        };
+        let Some(mut file) = episode.file.take() else {
+            return Ok(());
+        };
+        let start = file.start_ns.unwrap_or(episode.info.start_ns);
+        episode.files.push(FileSummary {
+            path: file.relative.clone(),
+            start_ns: start,
+            duration_ns: file.last_ns.saturating_sub(start),
+            message_count: file.count,
+        });
+        if episode.failed.is_some() {
+            // Finishing would write a summary after a failed write; the file stays as it is.
+            return Ok(());
+        }
+        let bag = summary(episode, &self.topics);
+        let records = [
+            (
+                "rosbag2",
+                BTreeMap::from([("serialized_metadata".to_owned(), metadata_yaml(&bag))]),
+            ),
+            ("episode", episode.info.custom_data().into_iter().collect()),
+        ];
+        let path = file.path.clone();
+        for (name, metadata) in records {
+            file.writer
+                .write_metadata(&mcap::records::Metadata {
+                    name: name.to_owned(),
+                    metadata,
+                })
+                .map_err(|source| BagError::Mcap {
+                    path: path.clone(),
+                    source,
+                })?;
+        }
+        file.writer
+            .finish()
+            .map(|_| ())
+            .map_err(|source| BagError::Mcap { path, source })
+    }
+
+    /// A write failed: say so once, stop writing this episode, keep what is on disk.
+    fn fail(&mut self, error: BagError) {
+        tracing::error!(%error, "recording failed: the episode's file is closed where it stands (chunks written so far stay readable); its remaining messages are dropped");
+        if let Some(episode) = self.episode.as_mut() {
+            episode.failed = Some(error.to_string());
+            episode.info.dropped += 1;
+        }
+        let _ = self.close_file();
+    }
+
+    pub fn failure(&self) -> Option<&str> {
+        self.episode.as_ref().and_then(|e| e.failed.as_deref())
+    }
+}
+
+fn summary(episode: &Episode, topics: &[TopicInfo]) -> BagSummary {
+    let start = episode.first_ns.unwrap_or(episode.info.start_ns);
+    BagSummary {
+        start_ns: start,
+        duration_ns: episode.last_ns.saturating_sub(start),
+        message_count: episode.count,
+        topics: topics
+            .iter()
+            .zip(&episode.counts)
+            .filter(|(_, count)| **count > 0)
+            .map(|(topic, count)| TopicSummary {
+                name: topic.name.clone(),
+                type_name: topic.type_name.clone(),
+                qos: topic.qos,
+                message_count: *count,
+            })
+            .collect(),
+        files: episode.files.clone(),
+        custom_data: episode.info.custom_data(),
+    }
+}
+
+fn write_metadata_yaml(episode: &Episode, topics: &[TopicInfo]) -> Result<(), BagError> {
+    let path = episode.dir.join("metadata.yaml");
+    let temporary = episode.dir.join("metadata.yaml.tmp");
+    let text = metadata_yaml(&summary(episode, topics));
+    std::fs::write(&temporary, text)
+        .and_then(|()| std::fs::rename(&temporary, &path))
+        .map_err(|source| BagError::Metadata { path, source })
+}
+
+/// One past the highest `<prefix>_NNNNNN` in `dir` (earlier recordings are never overwritten).
+fn next_free_index(dir: &Path, prefix: &str) -> u64 {
+    let lead = format!("{prefix}_");
+    std::fs::read_dir(dir)
+        .into_iter()
+        .flatten()
+        .flatten()
+        .filter_map(|entry| {
+            let name = entry.file_name().into_string().ok()?;
+            name.strip_prefix(&lead)?.parse::<u64>().ok()
+        })
+        .max()
+        .map_or(0, |highest| highest + 1)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn options(dir: &Path) -> BagOptions {
+        BagOptions {
+            output: dir.to_owned(),
+            prefix: "episode".into(),
+            compression: None,
+            chunk_size: 1024,
+            max_chunk_age: Duration::from_secs(1),
+            split_size: None,
+            split_duration: Some(Duration::from_secs(1)),
+            default_task: "test".into(),
+        }
+    }
+
+    fn topic() -> TopicInfo {
+        TopicInfo {
+            name: "/chatter".into(),
+            type_name: "std_msgs/msg/String".into(),
+            schema: "string data\n".into(),
+            qos: QosSummary {
+                reliable: true,
+                depth: 10,
+            },
+        }
+    }
+
+    #[test]
+    fn episodes_get_their_own_numbered_directories_and_split_by_duration() {
+        let dir = tempfile::tempdir().unwrap();
+        std::fs::create_dir(dir.path().join("episode_000004")).unwrap();
+        let mut bag = BagWriter::new(options(dir.path())).unwrap();
+        bag.add_topic(topic());
+        let episode = bag.start(StartOptions::default(), 0).unwrap();
+        assert!(episode.ends_with("episode_000005"));
+        for i in 0..30u64 {
+            bag.write(&Message {
+                topic: 0,
+                data: vec![0, 1, 0, 0, 2, 0, 0, 0, b'h', 0],
+                log_ns: i * 100_000_000,
+                publish_ns: i * 100_000_000,
+            });
+        }
+        let info = bag.stop(3_000_000_000, Some(true)).unwrap();
+        assert_eq!(info.success, Some(true));
+        let files: Vec<_> = std::fs::read_dir(&episode)
+            .unwrap()
+            .flatten()
+            .map(|e| e.file_name())
+            .collect();
+        assert!(files.iter().any(|f| f == "metadata.yaml"));
+        assert!(
+            files.iter().any(|f| f == "episode_000005_2.mcap"),
+            "{files:?}"
+        );
+        let yaml = std::fs::read_to_string(episode.join("metadata.yaml")).unwrap();
+        assert!(yaml.contains("  message_count: 30\n"));
+        assert!(yaml.contains("episode_000005_0.mcap"));
+        assert!(matches!(bag.stop(0, None), Err(BagError::NotRecording)));
+    }
+
+    #[test]
+    fn a_discarded_episode_leaves_nothing_and_its_number_is_reused() {
+        let dir = tempfile::tempdir().unwrap();
+        let mut bag = BagWriter::new(options(dir.path())).unwrap();
+        bag.add_topic(topic());
+        let first = bag.start(StartOptions::default(), 0).unwrap();
+        assert_eq!(bag.discard().unwrap(), 0);
+        assert!(!first.exists());
+        let again = bag.start(StartOptions::default(), 0).unwrap();
+        assert_eq!(again, first);
+        // Messages outside an episode are not kept; the marker needs an episode.
+        bag.stop(1, None).unwrap();
+        bag.write(&Message {
+            topic: 0,
+            data: vec![0, 1, 0, 0],
+            log_ns: 2,
+            publish_ns: 2,
+        });
+        assert!(matches!(bag.mark(true), Err(BagError::NotRecording)));
+    }
+}

@@ -1,0 +1,570 @@
+//! The recorder node: raw subscriptions on one receive thread (woken by DDS, never blocked by the
+//! disk), episode control from events and services, and the writer thread that owns the bag.
+
+use std::{
+    collections::HashSet,
+    sync::{
+        atomic::{AtomicU64, Ordering},
+        mpsc::{sync_channel, Receiver, RecvTimeoutError, SyncSender, TrySendError},
+        Arc,
+    },
+    thread::JoinHandle,
+    time::{Duration, Instant, SystemTime, UNIX_EPOCH},
+};
+
+use anyhow::{Context as _, Result};
+use ros2_client::{QosProfile, Server, Subscription};
+use rustdds::{
+    mio::{Events, Poll, PollOpt, Ready, Token},
+    no_key::SimpleDataReader,
+    Timestamp,
+};
+use so101_core::ros::{qos, rate_limit::RateLimiter, shutdown::Shutdown, RosNode};
+use so101_msgs::{
+    std_msgs::{Bool, String as StringMessage},
+    std_srvs::{SetBool, SetBoolRequest, Trigger, TriggerRequest, TriggerResponse},
+    TypeInfo,
+};
+
+use crate::{
+    bag::{BagOptions, BagWriter, Message, TopicInfo},
+    cli::{seconds, Args},
+    episodes::{parse_event, EpisodeEvent, StartOptions},
+    gaps::GapTracker,
+    metadata::QosSummary,
+    raw::{RawAdapter, SerializedMessage},
+    topics::{known_type, ros_topic_name, ros_type_name, Selection, DEFAULT_FIXED},
+};
+
+/// Commands waiting for the writer thread, at most (besides the byte budget).
+const QUEUE_LEN: usize = 65_536;
+/// Reader history depth: enough for bursts while the receive thread is busy. Images are large,
+/// so their readers keep fewer.
+const DEPTH: usize = 1000;
+const IMAGE_DEPTH: usize = 64;
+const DISCOVERY_PERIOD: Duration = Duration::from_secs(1);
+const RECEIVE_WAIT: Duration = Duration::from_millis(20);
+/// How long a service call waits for the writer thread's answer.
+const REPLY_TIMEOUT: Duration = Duration::from_secs(5);
+
+type Reply = SyncSender<Result<String, String>>;
+
+enum Command {
+    Topic(TopicInfo),
+    Message(Message),
+    Start(StartOptions, u64, Option<Reply>),
+    Stop(u64, Option<bool>, Option<Reply>),
+    Mark(bool, Option<Reply>),
+    Discard(Option<Reply>),
+    Dropped(u64),
+    Shutdown(Option<bool>),
+}
+
+/// Bytes of messages in the queue, against a limit: the receive path never waits for the disk.
+struct QueueBudget {
+    bytes: AtomicU64,
+    limit: u64,
+}
+
+/// Runs the recorder until a signal or --duration.
+pub fn run(args: Args) -> Result<()> {
+    let shutdown = Shutdown::on_signals().context("cannot install the signal handlers")?;
+    let mut node = RosNode::start("recorder_node", &args.node)?;
+    let namespace = node.names().namespace().to_owned();
+    let selection = Selection::new(
+        &namespace,
+        &args.topics,
+        args.all,
+        &args.patterns,
+        args.exclude.as_deref(),
+    )?;
+    let bag = BagWriter::new(BagOptions {
+        output: args.output.clone(),
+        prefix: args.prefix.clone(),
+        compression: args.compression.to_mcap(),
+        chunk_size: args.chunk_size,
+        max_chunk_age: seconds(args.max_chunk_age),
+        split_size: args.split_size_mb.map(|mb| (mb * 1e6) as u64),
+        split_duration: args.split_duration.map(seconds),
+        default_task: args.task.clone(),
+    })
+    .with_context(|| format!("cannot record into {}", args.output.display()))?;
+    let budget = Arc::new(QueueBudget {
+        bytes: AtomicU64::new(0),
+        limit: (args.queue_mb * 1e6) as u64,
+    });
+    let (sender, receiver) = sync_channel(QUEUE_LEN);
+    let writer = spawn_writer(bag, receiver, Arc::clone(&budget))?;
+    let mut control = Control::serve(&mut node)?;
+    let mut inputs = Inputs::new(&node, selection)?;
+    if args.topics.is_empty() && !args.all && args.patterns.is_empty() {
+        inputs.subscribe_fixed_defaults(&mut node, &sender)?;
+    }
+    tracing::info!(output = %args.output.display(), compression = ?args.compression, "recorder ready");
+    if args.start {
+        control
+            .request(&sender, |reply| {
+                Command::Start(StartOptions::default(), now_ns(), Some(reply))
+            })
+            .map_err(|error| anyhow::anyhow!("cannot start recording: {error}"))?;
+    }
+    let deadline = args.duration.map(|s| Instant::now() + seconds(s));
+    let mut next_discovery = Instant::now();
+    while !shutdown.is_requested() && deadline.is_none_or(|d| Instant::now() < d) {
+        if Instant::now() >= next_discovery {
+            next_discovery = Instant::now() + DISCOVERY_PERIOD;
+            inputs.discover(&mut node, &sender);
+        }
+        control.take(&sender);
+        inputs.receive(&sender, &budget);
+    }
+    let _ = sender.send(Command::Shutdown(control.last_task_success));
+    drop(sender);
+    writer
+        .join()
+        .map_err(|_| anyhow::anyhow!("the writer thread panicked"))?;
+    tracing::info!(dropped = inputs.dropped, "recorder stopped");
+    Ok(())
+}
+
+/// Wall clock in ns since the epoch (log time of messages, episode times).
+fn now_ns() -> u64 {
+    SystemTime::now()
+        .duration_since(UNIX_EPOCH)
+        .map_or(0, |d| d.as_nanos() as u64)
+}
+
+fn ns_from_timestamp(timestamp: Timestamp) -> u64 {
+    let ticks = timestamp.to_ticks();
+    (ticks >> 32) * 1_000_000_000 + (((ticks & 0xFFFF_FFFF) * 1_000_000_000) >> 32)
+}
+
+fn spawn_writer(
+    mut bag: BagWriter,
+    commands: Receiver<Command>,
+    budget: Arc<QueueBudget>,
+) -> Result<JoinHandle<()>> {
+    std::thread::Builder::new()
+        .name("bag writer".into())
+        .spawn(move || loop {
+            match commands.recv_timeout(Duration::from_millis(100)) {
+                Ok(Command::Message(message)) => {
+                    budget
+                        .bytes
+                        .fetch_sub(message.data.len() as u64, Ordering::Relaxed);
+                    bag.write(&message);
+                }
+                Ok(Command::Topic(topic)) => bag.add_topic(topic),
+                Ok(Command::Start(options, at, reply)) => answer(
+                    reply,
+                    bag.start(options, at)
+                        .map(|dir| format!("recording into {}", dir.display())),
+                ),
+                Ok(Command::Stop(at, hint, reply)) => answer(
+                    reply,
+                    bag.stop(at, hint).map(|info| {
+                        format!(
+                            "episode {} stopped (success: {})",
+                            info.index,
+                            info.success.map_or("unknown".into(), |s| s.to_string())
+                        )
+                    }),
+                ),
+                Ok(Command::Mark(success, reply)) => answer(
+                    reply,
+                    bag.mark(success)
+                        .map(|index| format!("episode {index} marked success={success}")),
+                ),
+                Ok(Command::Discard(reply)) => answer(
+                    reply,
+                    bag.discard()
+                        .map(|index| format!("episode {index} discarded")),
+                ),
+                Ok(Command::Dropped(count)) => bag.add_dropped(count),
+                Ok(Command::Shutdown(hint)) => {
+                    if bag.is_recording() {
+                        if let Err(error) = bag.stop(now_ns(), hint) {
+                            tracing::error!(%error, "closing the last episode failed");
+                        }
+                    }
+                    return;
+                }
+                Err(RecvTimeoutError::Timeout) => {}
+                Err(RecvTimeoutError::Disconnected) => return,
+            }
+            bag.tick();
+        })
+        .context("cannot start the writer thread")
+}
+
+fn answer<E: std::fmt::Display>(reply: Option<Reply>, result: Result<String, E>) {
+    let result = result.map_err(|error| error.to_string());
+    match (&result, reply) {
+        (_, Some(reply)) => {
+            let _ = reply.send(result);
+        }
+        (Err(error), None) => tracing::warn!(%error, "episode command failed"),
+        (Ok(_), None) => {}
+    }
+}
+
+/// The QoS the recorder subscribes with: reliable (lossless), volatile, a deep history.
+fn reader_qos(depth: usize) -> QosProfile {
+    qos::reliable(depth)
+}
+
+struct Input {
+    topic: usize,
+    name: String,
+    reader: SimpleDataReader<SerializedMessage, RawAdapter>,
+}
+
+/// The raw subscriptions and their wake-up.
+struct Inputs {
+    subscriber: rustdds::Subscriber,
+    poll: Poll,
+    events: Events,
+    inputs: Vec<Input>,
+    /// Topic names already subscribed or refused.
+    seen: HashSet<String>,
+    selection: Selection,
+    gaps: GapTracker,
+    dropped: u64,
+    warnings: RateLimiter,
+}
+
+impl Inputs {
+    fn new(node: &RosNode, selection: Selection) -> Result<Self> {
+        let subscriber = node
+            .context()
+            .domain_participant()
+            .create_subscriber(&(&reader_qos(DEPTH)).into())
+            .map_err(|error| anyhow::anyhow!("cannot create the DDS subscriber: {error:?}"))?;
+        Ok(Self {
+            subscriber,
+            poll: Poll::new().context("cannot create the receive poll")?,
+            events: Events::with_capacity(256),
+            inputs: Vec::new(),
+            seen: HashSet::new(),
+            selection,
+            gaps: GapTracker::default(),
+            dropped: 0,
+            warnings: RateLimiter::new(Duration::from_secs(2)),
+        })
+    }
+
+    fn subscribe_fixed_defaults(
+        &mut self,
+        node: &mut RosNode,
+        commands: &SyncSender<Command>,
+    ) -> Result<()> {
+        for (relative, type_name) in DEFAULT_FIXED {
+            let name = node.names().resolve(relative);
+            if let Some(info) = known_type(type_name) {
+                self.subscribe(node, &name, info, commands)?;
+            }
+        }
+        Ok(())
+    }
+
+    /// Subscribes to newly discovered topics the selection wants.
+    fn discover(&mut self, node: &mut RosNode, commands: &SyncSender<Command>) {
+        for topic in node.context().discovered_topics() {
+            let (Some(name), Some(type_name)) =
+                (ros_topic_name(&topic.name), ros_type_name(&topic.type_name))
+            else {
+                continue;
+            };
+            if self.seen.contains(&name) || !self.selection.wants(&name) {
+                continue;
+            }
+            match known_type(&type_name) {
+                Some(info) => {
+                    if let Err(error) = self.subscribe(node, &name, info, commands) {
+                        tracing::warn!(topic = %name, %error, "cannot subscribe");
+                    }
+                }
+                None => {
+                    self.seen.insert(name.clone());
+                    tracing::warn!(
+                        topic = %name,
+                        r#type = %type_name,
+                        "not recorded: the recorder has no definition of this type to write its schema"
+                    );
+                }
+            }
+        }
+    }
+
+    fn subscribe(
+        &mut self,
+        node: &mut RosNode,
+        name: &str,
+        info: &'static TypeInfo,
+        commands: &SyncSender<Command>,
+    ) -> Result<()> {
+        let depth = if info.name.contains("Image") {
+            IMAGE_DEPTH
+        } else {
+            DEPTH
+        };
+        let qos = reader_qos(depth);
+        let topic_name = node.names().name(name)?;
+        let topic = node
+            .node()
+            .create_topic(&topic_name, info.message_type_name(), &qos)
+            .map_err(|error| anyhow::anyhow!("cannot create topic {name}: {error:?}"))?;
+        let reader = self
+            .subscriber
+            .create_simple_datareader_no_key::<SerializedMessage, RawAdapter>(
+                &topic,
+                Some((&qos).into()),
+            )
+            .map_err(|error| anyhow::anyhow!("cannot subscribe {name}: {error:?}"))?;
+        let index = self.inputs.len();
+        self.poll
+            .register(&reader, Token(index), Ready::readable(), PollOpt::edge())
+            .with_context(|| format!("cannot watch {name}"))?;
+        // The writer learns the topic before any of its messages (same queue, in order).
+        commands
+            .send(Command::Topic(TopicInfo {
+                name: name.to_owned(),
+                type_name: info.full_name(),
+                schema: info.ros2msg_schema(),
+                qos: QosSummary {
+                    reliable: true,
+                    depth,
+                },
+            }))
+            .map_err(|_| anyhow::anyhow!("the writer thread is gone"))?;
+        self.seen.insert(name.to_owned());
+        self.inputs.push(Input {
+            topic: index,
+            name: name.to_owned(),
+            reader,
+        });
+        tracing::info!(topic = name, r#type = %info.full_name(), "recording topic");
+        Ok(())
+    }
+
+    /// Waits for data (at most RECEIVE_WAIT) and hands every sample to the writer.
+    fn receive(&mut self, commands: &SyncSender<Command>, budget: &QueueBudget) {
+        if let Err(error) = self.poll.poll(&mut self.events, Some(RECEIVE_WAIT)) {
+            tracing::warn!(%error, "receive poll failed");
+            std::thread::sleep(RECEIVE_WAIT);
+        }
+        let mut lost = 0;
+        for input in &self.inputs {
+            input.reader.drain_read_notifications();
+            loop {
+                let change = match input.reader.try_take_one() {
+                    Ok(Some(change)) => change,
+                    Ok(None) => break,
+                    Err(error) => {
+                        if let Some(suppressed) = self.warnings.check(Instant::now()) {
+                            tracing::warn!(topic = %input.name, ?error, suppressed, "bad sample");
+                        }
+                        break;
+                    }
+                };
+                lost += self.gaps.observe(
+                    input.topic,
+                    change.writer_guid.to_bytes(),
+                    i64::from(change.sequence_number),
+                );
+                let log_ns = ns_from_timestamp(change.receive_instant);
+                let publish_ns = change.source_timestamp().map_or(log_ns, ns_from_timestamp);
+                let data = change.sample.0;
+                let size = data.len() as u64;
+                if budget.bytes.load(Ordering::Relaxed) + size > budget.limit {
+                    lost += 1;
+                    continue;
+                }
+                budget.bytes.fetch_add(size, Ordering::Relaxed);
+                let message = Command::Message(Message {
+                    topic: input.topic,
+                    data,
+                    log_ns,
+                    publish_ns,
+                });
+                if let Err(TrySendError::Full(_) | TrySendError::Disconnected(_)) =
+                    commands.try_send(message)
+                {
+                    budget.bytes.fetch_sub(size, Ordering::Relaxed);
+                    lost += 1;
+                }
+            }
+        }
+        if lost > 0 {
+            self.dropped += lost;
+            if let Some(suppressed) = self.warnings.check(Instant::now()) {
+                tracing::warn!(
+                    lost,
+                    total = self.dropped,
+                    suppressed,
+                    "messages lost (sequence gaps or a full writer queue)"
+                );
+            }
+            let _ = commands.send(Command::Dropped(lost));
+        }
+    }
+}
+
+/// Episode control: /episode/events, /task/success (the default for an unmarked episode) and the
+/// recorder's services.
+struct Control {
+    events: Subscription<StringMessage>,
+    task_success: Subscription<Bool>,
+    start: Server<TriggerRequest, TriggerResponse>,
+    stop: Server<TriggerRequest, TriggerResponse>,
+    discard: Server<TriggerRequest, TriggerResponse>,
+    mark_success: Server<SetBoolRequest, TriggerResponse>,
+    last_task_success: Option<bool>,
+    warnings: RateLimiter,
+}
+
+impl Control {
+    fn serve(node: &mut RosNode) -> Result<Self> {
+        Ok(Self {
+            events: node.subscription("episode/events", qos::command_subscription())?,
+            task_success: node.subscription("task/success", qos::command_subscription())?,
+            start: node.server::<Trigger>("recorder/start")?,
+            stop: node.server::<Trigger>("recorder/stop")?,
+            discard: node.server::<Trigger>("recorder/discard")?,
+            mark_success: node.server::<SetBool>("recorder/mark_success")?,
+            last_task_success: None,
+            warnings: RateLimiter::new(Duration::from_secs(1)),
+        })
+    }
+
+    /// Sends a command and waits for the writer's answer.
+    fn request(
+        &mut self,
+        commands: &SyncSender<Command>,
+        command: impl FnOnce(Reply) -> Command,
+    ) -> Result<String, String> {
+        let (reply, answer) = sync_channel(1);
+        commands
+            .send(command(reply))
+            .map_err(|_| "the writer thread is gone".to_owned())?;
+        let result = answer
+            .recv_timeout(REPLY_TIMEOUT)
+            .unwrap_or_else(|_| Err("the writer did not answer in time".to_owned()));
+        match &result {
+            Ok(message) => tracing::info!("{message}"),
+            Err(error) => tracing::warn!("{error}"),
+        }
+        result
+    }
+
+    fn take(&mut self, commands: &SyncSender<Command>) {
+        while let Ok(Some((message, _))) = self.task_success.take() {
+            self.last_task_success = Some(message.data);
+        }
+        while let Ok(Some((message, _))) = self.events.take() {
+            match parse_event(&message.data) {
+                Ok(event) => {
+                    let _ = self.apply(event, commands);
+                }
+                Err(error) => {
+                    if let Some(suppressed) = self.warnings.check(Instant::now()) {
+                        tracing::warn!(suppressed, "episode event ignored: {error}");
+                    }
+                }
+            }
+        }
+        let triggers = [
+            (0, take_trigger(&self.start)),
+            (1, take_trigger(&self.stop)),
+            (2, take_trigger(&self.discard)),
+        ];
+        for (which, requests) in triggers {
+            for id in requests {
+                let event = match which {
+                    0 => EpisodeEvent::Start(StartOptions::default()),
+                    1 => EpisodeEvent::Stop,
+                    _ => EpisodeEvent::Discard,
+                };
+                let result = self.apply(event, commands);
+                let server = match which {
+                    0 => &self.start,
+                    1 => &self.stop,
+                    _ => &self.discard,
+                };
+                respond(server, id, result);
+            }
+        }
+        while let Ok(Some((id, request))) = self.mark_success.receive_request() {
+            let event = if request.data {
+                EpisodeEvent::Success
+            } else {
+                EpisodeEvent::Failure
+            };
+            let result = self.apply(event, commands);
+            respond(&self.mark_success, id, result);
+        }
+    }
+
+    fn apply(
+        &mut self,
+        event: EpisodeEvent,
+        commands: &SyncSender<Command>,
+    ) -> Result<String, String> {
+        match event {
+            EpisodeEvent::Start(options) => {
+                self.last_task_success = None;
+                self.request(commands, |reply| {
+                    Command::Start(options, now_ns(), Some(reply))
+                })
+            }
+            EpisodeEvent::Stop => {
+                let hint = self.last_task_success;
+                self.request(commands, |reply| Command::Stop(now_ns(), hint, Some(reply)))
+            }
+            EpisodeEvent::Success => {
+                self.request(commands, |reply| Command::Mark(true, Some(reply)))
+            }
+            EpisodeEvent::Failure => {
+                self.request(commands, |reply| Command::Mark(false, Some(reply)))
+            }
+            EpisodeEvent::Discard => self.request(commands, |reply| Command::Discard(Some(reply))),
+            EpisodeEvent::Rerecord => {
+                let _ = self.request(commands, |reply| Command::Discard(Some(reply)));
+                self.last_task_success = None;
+                self.request(commands, |reply| {
+                    Command::Start(StartOptions::default(), now_ns(), Some(reply))
+                })
+            }
+        }
+    }
+}
+
+fn take_trigger(
+    server: &Server<TriggerRequest, TriggerResponse>,
+) -> Vec<ros2_client::RmwRequestId> {
+    std::iter::from_fn(|| match server.receive_request() {
+        Ok(Some((id, _))) => Some(id),
+        _ => None,
+    })
+    .collect()
+}
+
+fn respond<Q: ros2_client::Message + 'static>(
+    server: &Server<Q, TriggerResponse>,
+    id: ros2_client::RmwRequestId,
+    result: Result<String, String>,
+) {
+    let response = match result {
+        Ok(message) => TriggerResponse {
+            success: true,
+            message,
+        },
+        Err(message) => TriggerResponse {
+            success: false,
+            message,
+        },
+    };
+    if let Err(error) = server.send_response(id, response) {
+        tracing::warn!(?error, "cannot answer a recorder service call");
+    }
+}
