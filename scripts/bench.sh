@@ -3,6 +3,7 @@
 #   scripts/bench.sh                     both, with their defaults
 #   scripts/bench.sh sim [--repeats N] [--seconds S] [--samples N] [--json FILE]
 #   scripts/bench.sh driver [--repeats N] [--seconds S] [--baud B] [--json FILE]
+#   scripts/bench.sh recorder [--seconds S] [--repeats N] [--workdir DIR] [--json FILE]
 set -euo pipefail
 . "$(dirname "${BASH_SOURCE[0]}")/common.sh"
 REPO_ROOT="${SO101_ROOT}"
@@ -12,7 +13,7 @@ run() {
         --bin-dir "${CARGO_TARGET_DIR}/release" "${@:2}"
 }
 case "${1:-all}" in
-    sim | driver) run "$@" ;;
-    all) run sim && run driver ;;
-    *) echo "usage: scripts/bench.sh [sim|driver] [ARGS...]" >&2; exit 2 ;;
+    sim | driver | recorder) run "$@" ;;
+    all) run sim && run driver && run recorder ;;
+    *) echo "usage: scripts/bench.sh [sim|driver|recorder] [ARGS...]" >&2; exit 2 ;;
 esac

@@ -194,6 +194,9 @@ impl BagWriter {
             .library(concat!("so101 recorder_node ", env!("CARGO_PKG_VERSION")))
             .compression(self.options.compression)
             .chunk_size(Some(self.options.chunk_size))
+            // rosbag2's defaults: no chunk or data-section CRCs (each would read every byte again).
+            .calculate_chunk_crcs(false)
+            .calculate_data_section_crc(false)
             .create(file)
             .map_err(|source| BagError::Mcap {
                 path: path.clone(),
