@@ -103,7 +103,7 @@ def pytest_runtest_makereport(item: pytest.Item, call: pytest.CallInfo):
     """Attach the output of every node of a failed test to its report."""
     report = yield
     if report.failed:
-        for index, node in enumerate(getattr(item, "_so101_sim_nodes", [])):
+        for index, node in enumerate([*getattr(item, "_so101_sim_nodes", []), *getattr(item, "_so101_recorders", [])]):
             report.sections.append((f"node #{index} output ({report.when}): {node.describe()}", node.log_tail(20000)))
     return report
 
@@ -143,6 +143,36 @@ def arm_factory(request: pytest.FixtureRequest, tmp_path: Path):
             problems.append(f"{node.describe()} ended {how} with {describe_returncode(code)}; its output:\n{node.log_tail()}")
     for emulator in emulators:
         emulator.stop()
+    if problems:
+        pytest.fail("\n\n".join(problems), pytrace=False)
+
+
+# =========================================================================== the recorder
+@pytest.fixture
+def recorder_factory(request: pytest.FixtureRequest, tmp_path: Path):
+    """start(*args, output=tmp_path/"bags") -> SimNode: recorder_node recording into `output`. At
+    teardown it gets SIGINT and must exit 0 (unless the test set `node.exit_expected = True`)."""
+    nodes: list[SimNode] = []
+
+    def start(*args: str, output: Path | None = None) -> SimNode:
+        output = output or tmp_path / "bags"
+        argv = ["--output", str(output), *[str(a) for a in args]]
+        node = SimNode(node_binary("recorder_node"), argv, tmp_path / f"recorder_node.{len(nodes)}.log")
+        node.output = output
+        nodes.append(node)
+        # Shown with the other nodes' output when the test fails.
+        request.node._so101_recorders = nodes
+        return node
+
+    yield start
+
+    problems = []
+    for node in nodes:
+        was_running = node.alive()
+        code = node.stop()
+        if code != 0 and not getattr(node, "exit_expected", False):
+            how = "after SIGINT" if was_running else "by itself during the test"
+            problems.append(f"{node.describe()} ended {how} with {describe_returncode(code)}; its output:\n{node.log_tail()}")
     if problems:
         pytest.fail("\n\n".join(problems), pytrace=False)
 

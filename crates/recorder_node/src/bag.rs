@@ -454,9 +454,10 @@ impl BagWriter {
 
     /// A write failed: say so once, stop writing this episode, keep what is on disk.
     fn fail(&mut self, error: BagError) {
+        let error = error_chain(&error);
         tracing::error!(%error, "recording failed: the episode's file is closed where it stands (chunks written so far stay readable); its remaining messages are dropped");
         if let Some(episode) = self.episode.as_mut() {
-            episode.failed = Some(error.to_string());
+            episode.failed = Some(error);
             episode.info.dropped += 1;
         }
         let _ = self.close_file();
@@ -495,7 +496,26 @@ fn write_metadata_yaml(episode: &Episode, topics: &[TopicInfo]) -> Result<(), Ba
     let text = metadata_yaml(&summary(episode, topics));
     std::fs::write(&temporary, text)
         .and_then(|()| std::fs::rename(&temporary, &path))
-        .map_err(|source| BagError::Metadata { path, source })
+        .map_err(|source| {
+            // Never leave a half-written file next to the bag.
+            let _ = std::fs::remove_file(&temporary);
+            BagError::Metadata { path, source }
+        })
+}
+
+/// An error with its causes, "a: b: c" (mcap's own message hides the OS error otherwise).
+pub fn error_chain(error: &dyn std::error::Error) -> String {
+    let mut text = error.to_string();
+    let mut source = error.source();
+    while let Some(cause) = source {
+        let cause_text = cause.to_string();
+        if !text.contains(&cause_text) {
+            text.push_str(": ");
+            text.push_str(&cause_text);
+        }
+        source = cause.source();
+    }
+    text
 }
 
 /// One past the highest `<prefix>_NNNNNN` in `dir` (earlier recordings are never overwritten).
