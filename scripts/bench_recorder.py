@@ -5,9 +5,9 @@
    (so101_load_publisher) recorded by recorder_node: every message kept? recorder CPU.
 2. Sustained: the two cameras at rising rates (joint states at 500 Hz): the highest rate the
    recorder keeps every message of, end to end (DDS receive + MCAP), in MB/s and messages/s.
-3. The writing side alone on the bag of (1): the recorder's BagWriter (bag_write_bench) against a
-   raw sequential write of the same message bytes and against the Python mcap writer, each with
-   fsync, as ratios.
+3. The writing side alone on the bag of (1): the recorder's BagWriter against a raw sequential
+   write of the same message bytes (both by bag_write_bench, same process conditions) and against
+   the Python mcap writer, each with fsync, as ratios.
 
 Opens DDS participants: run inside a private network namespace (scripts/bench.sh recorder does).
 """
@@ -84,18 +84,7 @@ def load_messages(path: str):
         return [(schema, channel, message) for schema, channel, message in reader.iter_messages(log_time_order=False)]
 
 
-def raw_write(messages, path: Path) -> float:
-    payload = memoryview(b"".join(message.data for _, _, message in messages))
-    started = time.perf_counter()
-    with open(path, "wb") as f:
-        for offset in range(0, len(payload), 8 << 20):
-            f.write(payload[offset : offset + (8 << 20)])
-        f.flush()
-        os.fsync(f.fileno())
-    return time.perf_counter() - started
-
-
-def python_mcap_write(messages, path: Path) -> float:
+def python_mcap_write(messages, path: Path, fsync: bool) -> float:
     from mcap.writer import CompressionType, Writer
 
     started = time.perf_counter()
@@ -111,13 +100,17 @@ def python_mcap_write(messages, path: Path) -> float:
             writer.add_message(channels[channel.id], message.log_time, message.data, message.publish_time, message.sequence)
         writer.finish()
         f.flush()
-        os.fsync(f.fileno())
+        if fsync:
+            os.fsync(f.fileno())
     return time.perf_counter() - started
 
 
-def rust_write(bin_dir: Path, bag: str, out: Path) -> float:
+def rust_write(bin_dir: Path, bag: str, out: Path, mode: str, fsync: bool) -> float:
+    """The recorder's BagWriter (mode bag) or a plain sequential write of the same bytes (raw),
+    both from the same Rust program under the same conditions."""
     done = subprocess.run(
-        [str(bin_dir / "bag_write_bench"), "--input", bag, "--output", str(out)],
+        [str(bin_dir / "bag_write_bench"), "--input", bag, "--output", str(out), "--mode", mode]
+        + ([] if fsync else ["--no-fsync"]),
         capture_output=True, text=True, timeout=600,
     )
     if done.returncode != 0:
@@ -161,20 +154,28 @@ def main() -> int:
         bag = load["files"][0]
         messages = load_messages(bag)
         total_bytes = sum(len(m.data) for _, _, m in messages)
-        times = {"raw": [], "python_mcap": [], "recorder_bag_writer": []}
-        for repeat in range(args.repeats):
-            times["raw"].append(raw_write(messages, work / f"raw{repeat}.bin"))
-            (work / f"raw{repeat}.bin").unlink()
-            times["python_mcap"].append(python_mcap_write(messages, work / f"py{repeat}.mcap"))
-            (work / f"py{repeat}.mcap").unlink()
-            times["recorder_bag_writer"].append(rust_write(args.bin_dir, bag, work / f"rust{repeat}"))
-            shutil.rmtree(work / f"rust{repeat}")
-        results["writers"] = {
-            "messages": len(messages),
-            "bytes": total_bytes,
-            "seconds": {k: statistics.median(v) for k, v in times.items()},
-            "runs": times,
-        }
+        results["writers"] = {"messages": len(messages), "bytes": total_bytes}
+        for durable in (False, True):
+            times = {"raw": [], "recorder_bag_writer": [], "python_mcap": []}
+            writers = {
+                "raw": lambda r: rust_write(args.bin_dir, bag, work / f"raw{r}", "raw", durable),
+                "recorder_bag_writer": lambda r: rust_write(args.bin_dir, bag, work / f"rust{r}", "bag", durable),
+                "python_mcap": lambda r: python_mcap_write(messages, work / f"py{r}.mcap", durable),
+            }
+            order = list(writers)
+            for repeat in range(args.repeats):
+                # Each writer starts from a clean disk (no one else's dirty pages in its fsync),
+                # in a rotating order.
+                for name in order[repeat % 3 :] + order[: repeat % 3]:
+                    os.sync()
+                    time.sleep(0.5)
+                    times[name].append(writers[name](repeat))
+                    for leftover in list(work.glob(f"raw{repeat}")) + list(work.glob(f"rust{repeat}")) + list(work.glob(f"py{repeat}.mcap")):
+                        shutil.rmtree(leftover) if leftover.is_dir() else leftover.unlink()
+            results["writers"]["fsync" if durable else "page_cache"] = {
+                "seconds": {k: statistics.median(v) for k, v in times.items()},
+                "runs": times,
+            }
     finally:
         shutil.rmtree(work, ignore_errors=True)
 
@@ -194,13 +195,14 @@ def main() -> int:
             f"{step['file_bytes'] / 1e6 / seconds:.1f} | {sum(step['recorded'].values()) / seconds:.0f} | "
             f"{100 * step['recorder_cpu_seconds'] / (seconds + 1):.0f} % |"
         )
-    seconds = writers["seconds"]
-    mbps = {k: writers["bytes"] / 1e6 / v for k, v in seconds.items()}
-    print(f"\n## Writers on the same {writers['messages']} messages ({writers['bytes'] / 1e6:.0f} MB), fsync included, medians of {args.repeats}")
-    print("| writer | MB/s | messages/s | ratio to raw write | ratio to Python mcap |")
-    print("|---|---|---|---|---|")
-    for key in ("raw", "recorder_bag_writer", "python_mcap"):
-        print(f"| {key} | {mbps[key]:.0f} | {writers['messages'] / seconds[key]:.0f} | {mbps[key] / mbps['raw']:.2f} | {mbps[key] / mbps['python_mcap']:.2f} |")
+    for mode, title in (("page_cache", "page cache (no fsync): the writers' own cost"), ("fsync", "fsync included: this disk")):
+        seconds = writers[mode]["seconds"]
+        mbps = {k: writers["bytes"] / 1e6 / v for k, v in seconds.items()}
+        print(f"\n## Writers on the same {writers['messages']} messages ({writers['bytes'] / 1e6:.0f} MB), {title}, medians of {args.repeats}")
+        print("| writer | MB/s | messages/s | ratio to raw write | ratio to Python mcap |")
+        print("|---|---|---|---|---|")
+        for key in ("raw", "recorder_bag_writer", "python_mcap"):
+            print(f"| {key} | {mbps[key]:.0f} | {writers['messages'] / seconds[key]:.0f} | {mbps[key] / mbps['raw']:.2f} | {mbps[key] / mbps['python_mcap']:.2f} |")
     if args.json:
         args.json.write_text(json.dumps(results, indent=2))
     return 0
