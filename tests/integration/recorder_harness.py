@@ -109,7 +109,9 @@ def load_metadata(episode: Path) -> dict:
 
 
 def topic_counts(info: dict) -> dict[str, int]:
-    return {t["topic_metadata"]["name"]: t["message_count"] for t in info["topics_with_message_count"]}
+    """topic -> message_count of metadata.yaml, leaving out topics listed with 0 messages (rosbag2
+    lists every subscribed topic; the MCAP file has channels only for topics with messages)."""
+    return {t["topic_metadata"]["name"]: t["message_count"] for t in info["topics_with_message_count"] if t["message_count"]}
 
 
 def topic_types(info: dict) -> dict[str, str]:
@@ -326,3 +328,39 @@ class ImagePattern:
             return "no mismatch"
         i = int(wrong[0])
         return f"{wrong.size} bytes differ, first at {i}: {int(actual[i])} instead of {int(self.expected(k)[i])}"
+
+
+# =========================================================================== recorder services
+class RecorderServices:
+    """One rclpy client per recorder service, created once (a fresh client per call would wait for
+    discovery every time)."""
+
+    TRIGGERS = ("start", "stop", "discard")
+
+    def __init__(self, ros, recorder: SimNode | None, namespace: str = "", timeout: float = 15.0):
+        from std_srvs.srv import SetBool, Trigger
+
+        self._ros, self._recorder = ros, recorder
+        self._types = {name: Trigger for name in self.TRIGGERS}
+        self._types["mark_success"] = SetBool
+        self._clients = {
+            name: ros.node.create_client(srv, f"{namespace}/recorder/{name}") for name, srv in self._types.items()
+        }
+        for name, client in self._clients.items():
+            _wait(client.service_is_ready, timeout, f"service /recorder/{name}", recorder)
+        # The server's reply writer matches this client's reply reader a moment after the request
+        # side is ready; a reply sent before that would be lost.
+        time.sleep(0.5)
+
+    def call(self, name: str, data: bool | None = None, timeout: float = 10.0):
+        srv = self._types[name]
+        request = srv.Request() if data is None else srv.Request(data=data)
+        future = self._clients[name].call_async(request)
+        _wait(future.done, timeout, f"the answer of /recorder/{name}", self._recorder)
+        if future.exception() is not None:
+            raise future.exception()
+        return future.result()
+
+    def close(self) -> None:
+        for client in self._clients.values():
+            self._ros.node.destroy_client(client)

@@ -26,6 +26,7 @@ from recorder_harness import (
     RECORDER,
     SIM_RECORDED_TOPICS,
     ImagePattern,
+    RecorderServices,
     all_finite,
     check_metadata_fields,
     check_qos_profiles,
@@ -134,8 +135,15 @@ def test_default_recording_of_the_sim_reads_back_as_a_rosbag2_bag(sim_factory, r
     assert decoded == counts, (decoded, counts)
     # rosbag2: starting_time is the earliest message, duration reaches the latest.
     start = info["starting_time"]["nanoseconds_since_epoch"]
-    assert start == stats.message_start_time == min(m.record.log_time for m in bag.messages), (start, stats.message_start_time)
-    assert start + info["duration"]["nanoseconds"] == stats.message_end_time == max(m.record.log_time for m in bag.messages)
+    earliest = min(m.record.log_time for m in bag.messages)
+    latest = max(m.record.log_time for m in bag.messages)
+    assert stats.message_start_time == earliest and stats.message_end_time == latest
+    first_written = bag.messages[0]
+    assert start == earliest, (
+        f"metadata.yaml starting_time {start} is not the earliest message ({earliest}, {(start - earliest) / 1e6:.3f} ms earlier); "
+        f"it is the log_time of the first message in the file ({first_written.topic} @ {first_written.record.log_time})"
+    )
+    assert start + info["duration"]["nanoseconds"] == latest, "starting_time + duration is not the latest message"
     assert file_entry["starting_time"]["nanoseconds_since_epoch"] == start
     assert file_entry["duration"]["nanoseconds"] == info["duration"]["nanoseconds"]
 
@@ -202,7 +210,8 @@ def test_nothing_is_lost_at_the_stacks_load_and_every_byte_survives(recorder_fac
     check_metadata_fields(info, episode)
     assert topic_counts(info) == published, f"recorded {topic_counts(info)}, published {published}"
     assert info["custom_data"]["dropped_messages"] == "0", info["custom_data"]
-    assert topic_types(info) == {"/joint_states": "sensor_msgs/msg/JointState", **{c: "sensor_msgs/msg/Image" for c in cameras}}
+    types = topic_types(info)
+    assert types["/joint_states"] == "sensor_msgs/msg/JointState" and all(types[c] == "sensor_msgs/msg/Image" for c in cameras), types
 
     paths = mcap_files(episode)
     assert len(paths) == 1
@@ -319,50 +328,46 @@ def test_episodes_follow_the_events_topic(recorder_factory, ros):
 
 # =========================================================================== 4. services
 def test_services_drive_episodes_and_refuse_when_nothing_is_recorded(recorder_factory, ros):
-    from std_srvs.srv import SetBool, Trigger
-
     recorder = recorder_factory()
     output = recorder.output
+    services = RecorderServices(ros, recorder)
+    call = services.call
 
-    def call(name: str, data: bool | None = None):
-        if data is None:
-            return ros.call(Trigger, name, sim=recorder)
-        return ros.call(SetBool, name, SetBool.Request(data=data), sim=recorder)
-
-    answer = call("/recorder/start")
+    answer = call("start")
     assert answer.success, answer.message
     first = wait_episode(output, 0, recorder)
-    answer = call("/recorder/mark_success", True)
+    answer = call("mark_success", True)
     assert answer.success, answer.message
-    answer = call("/recorder/stop")
+    answer = call("stop")
     assert answer.success, answer.message
     info = wait_metadata(first, recorder)
     check_metadata_fields(info, first)
     assert info["custom_data"]["success"] == "true", info["custom_data"]
 
-    answer = call("/recorder/stop")
+    answer = call("stop")
     assert not answer.success and answer.message.strip(), f"a second stop answered {answer}"
-    answer = call("/recorder/discard")
+    answer = call("discard")
     assert not answer.success and answer.message.strip(), f"discard with nothing recorded answered {answer}"
-    answer = call("/recorder/mark_success", False)
+    answer = call("mark_success", False)
     assert not answer.success and answer.message.strip(), f"mark_success with nothing recorded answered {answer}"
     assert episode_dirs(output) == [first], "a refused call changed the bags"
     assert load_metadata(first)["custom_data"]["success"] == "true", "a refused mark_success changed a closed episode"
 
     # Discard a running episode: its directory goes and its number is used again.
-    assert call("/recorder/start").success
+    assert call("start").success
     second = wait_episode(output, 1, recorder)
-    answer = call("/recorder/discard")
+    answer = call("discard")
     assert answer.success, answer.message
     wait_gone(second, recorder)
-    assert call("/recorder/start").success
+    assert call("start").success
     assert wait_episode(output, 1, recorder) == second
-    answer = call("/recorder/mark_success", False)
+    answer = call("mark_success", False)
     assert answer.success, answer.message
-    assert call("/recorder/stop").success
+    assert call("stop").success
     info = wait_metadata(second, recorder)
     assert info["custom_data"]["success"] == "false" and info["custom_data"]["episode_index"] == "1", info["custom_data"]
     assert [e.name for e in episode_dirs(output)] == ["episode_000000", "episode_000001"]
+    services.close()
 
 
 # =========================================================================== 5. kill -9
@@ -418,7 +423,11 @@ def test_zstd_chunks_and_split_by_duration(sim_factory, recorder_factory, ros):
         assert all(c.compressed_size < c.uncompressed_size for c in chunks), f"{path.name}: chunks not smaller compressed"
         assert bag.summary.statistics.message_count == entry["message_count"] == len(bag.messages), path.name
         logs = [m.record.log_time for m in bag.messages]
-        assert entry["starting_time"]["nanoseconds_since_epoch"] == min(logs), f"{path.name}: starting_time is not its first message"
+        assert entry["starting_time"]["nanoseconds_since_epoch"] == min(logs), (
+            f"{path.name}: files[].starting_time {entry['starting_time']['nanoseconds_since_epoch']} is not its earliest message "
+            f"({min(logs)}, {(entry['starting_time']['nanoseconds_since_epoch'] - min(logs)) / 1e6:.3f} ms earlier) "
+            f"but its first written one ({bag.messages[0].topic} @ {logs[0]})"
+        )
         assert entry["duration"]["nanoseconds"] == max(logs) - min(logs), f"{path.name}: duration"
         assert max(logs) - min(logs) <= 1_200_000_000, f"{path.name} spans {(max(logs) - min(logs)) / 1e9:.2f} s with --split-duration 1"
         for topic, count in bag.channel_counts().items():
@@ -434,19 +443,21 @@ FULL_DISK_SCRIPT = """
 set -u
 disk={disk}; work={work}
 mount -t tmpfs -o size=4m tmpfs "$disk" || {{ echo "MOUNT FAILED"; exit 97; }}
-# 1 MiB of ballast, freed once the disk is full (as an operator would), so the episode can close.
+# 1 MiB of ballast, freed once the disk is full (as an operator would).
 head -c 1048576 /dev/zero > "$disk/ballast"
 {recorder} --output "$disk/bags" --start > "$work/recorder.log" 2>&1 &
 rec=$!
 for i in $(seq 400); do [ -f "$disk/bags/episode_000000/episode_000000_0.mcap" ] && break; sleep 0.05; done
-{publisher} --cameras top,front --camera-rate 30 --joint-rate 500 --duration 2 --wait-subscribers 2 \
+{publisher} --cameras top,front --camera-rate 30 --joint-rate 500 --duration 2 --wait-subscribers 2 \\
     > "$work/publisher.out" 2> "$work/publisher.err"
 echo "publisher exit $?"
 sleep 1
 df -k "$disk" > "$work/df.txt"
 if kill -0 $rec 2>/dev/null; then echo "recorder alive after the disk filled"; fi
 rm -f "$disk/ballast"
-sleep 0.5
+touch "$work/space_freed"
+# The test drives the recorder through its services meanwhile.
+for i in $(seq 600); do [ -f "$work/finish" ] && break; sleep 0.05; done
 kill -INT $rec
 wait $rec
 echo "recorder exit $?"
@@ -454,7 +465,9 @@ cp -a "$disk/bags" "$work/bags"
 """
 
 
-def test_a_full_disk_is_reported_and_what_was_written_stays_readable(tmp_path):
+def test_a_full_disk_is_reported_and_what_was_written_stays_readable(tmp_path, ros):
+    from sensor_msgs.msg import JointState
+
     probe = subprocess.run(["unshare", "--mount", "--propagation", "private", "true"], capture_output=True, text=True)
     if probe.returncode != 0:
         pytest.fail(f"cannot create a mount namespace for the small tmpfs (unshare --mount refused): {probe.stderr.strip()}", pytrace=False)
@@ -466,23 +479,72 @@ def test_a_full_disk_is_reported_and_what_was_written_stays_readable(tmp_path):
         recorder=shlex.quote(str(node_binary(RECORDER))),
         publisher=shlex.quote(str(node_binary(LOAD_PUBLISHER))),
     )
-    done = subprocess.run(
+    # Same network namespace as this test (its rclpy peer reaches the recorder), own mount namespace.
+    proc = subprocess.Popen(
         ["unshare", "--mount", "--propagation", "private", "bash", "-c", script],
-        env=node_environment(), capture_output=True, text=True, timeout=60,
+        env=node_environment(), stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
     )  # fmt: skip
     log_path = tmp_path / "recorder.log"
+    answers = {}
+    sent = 10
+    try:
+        deadline = time.monotonic() + 40
+        while not (tmp_path / "space_freed").exists():
+            if proc.poll() is not None or time.monotonic() > deadline:
+                out, err = proc.communicate(timeout=30) if proc.poll() is not None else ("", "")
+                pytest.fail(f"the full-disk script did not reach the freed-space phase:\n{out}\n{err[-2000:]}", pytrace=False)
+            time.sleep(0.05)
+        # The node keeps running for the next episode: close the failed one, record another.
+        services = RecorderServices(ros, None)
+        answers["stop failed episode"] = services.call("stop")
+        answers["start next episode"] = services.call("start")
+        commands = ros.publisher("/joint_commands", JointState, wait_for_subscriber=None)
+        wait_until(lambda: commands.get_subscription_count() >= 1, 15.0, "the recorder's reader of /joint_commands")
+        time.sleep(1.0)
+        for k in range(sent):
+            commands.publish(JointState(name=["gripper"], position=[k * 0.1]))
+            time.sleep(0.02)
+        time.sleep(0.5)
+        answers["stop next episode"] = services.call("stop")
+        services.close()
+    finally:
+        (tmp_path / "finish").touch()
+        try:
+            out, err = proc.communicate(timeout=30)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+            out, err = proc.communicate()
     log = log_path.read_text(errors="replace") if log_path.exists() else "<no recorder log>"
-    context = f"script stdout:\n{done.stdout}\nstderr:\n{done.stderr[-2000:]}\nrecorder log:\n{log[-4000:]}"
-    assert "MOUNT FAILED" not in done.stdout, f"cannot mount a tmpfs in the mount namespace:\n{context}"
-    assert "publisher exit 0" in done.stdout, context
-    assert "recorder alive after the disk filled" in done.stdout, f"the recorder died when the disk filled:\n{context}"
-    assert "recorder exit 0" in done.stdout, f"the recorder did not exit 0 on SIGINT after the full disk:\n{context}"
+    context = f"script stdout:\n{out}\nstderr:\n{err[-2000:]}\nrecorder log:\n{log[-4000:]}"
+    assert proc.returncode == 0 and "MOUNT FAILED" not in out, f"the full-disk script failed ({proc.returncode}):\n{context}"
+    assert "publisher exit 0" in out, context
+    assert "recorder alive after the disk filled" in out, f"the recorder died when the disk filled:\n{context}"
+    assert "recorder exit 0" in out, f"the recorder did not exit 0 on SIGINT after the full disk:\n{context}"
     errors = [line for line in log.splitlines() if "No space left on device" in line]
     assert errors, f"no log line names the OS error (No space left on device):\n{log[-4000:]}"
     assert any("error" in line.lower() for line in errors), errors
+    for what, answer in answers.items():
+        assert answer.success, f"{what}: {answer.message}\n{log[-3000:]}"
 
-    [episode] = episode_dirs(tmp_path / "bags")
-    [path] = mcap_files(episode)
+    first, second = episode_dirs(tmp_path / "bags")
+    # The failed episode: closed once space was freed, its loss counted.
+    assert (first / "metadata.yaml").exists(), f"no metadata.yaml; files {sorted(p.name for p in first.iterdir())}\n{log[-3000:]}"
+    info = load_metadata(first)
+    check_metadata_fields(info, first)
+    report = json.loads((tmp_path / "publisher.out").read_text().strip().splitlines()[-1])
+    dropped = int(info["custom_data"]["dropped_messages"])
+    assert dropped > 0, f"the messages after the full disk are not counted as dropped: {info['custom_data']}"
+    # Every published message reached the recorder (reliable): written, or counted as dropped.
+    assert info["message_count"] + dropped == sum(report["published"].values()), (info["message_count"], dropped, report)
+    # The next episode is a complete bag.
+    second_info = load_metadata(second)
+    check_metadata_fields(second_info, second)
+    assert second_info["custom_data"]["dropped_messages"] == "0", second_info["custom_data"]
+    bag = read_bag(mcap_files(second)[0])
+    assert [m.ros.position[0] for m in bag.on("/joint_commands")] == [k * 0.1 for k in range(sent)]
+
+    # What the failed file holds stays readable, chunk by chunk.
+    [path] = mcap_files(first)
     got = recover(path)
     assert got.messages, f"nothing readable in {path.name} ({path.stat().st_size} bytes; reader stopped by {got.error!r})"
     cameras = ("/camera/top/image_raw", "/camera/front/image_raw")
@@ -493,25 +555,20 @@ def test_a_full_disk_is_reported_and_what_was_written_stays_readable(tmp_path):
         for m in got.messages
         if m.topic in cameras and len(m.ros.data) != m.ros.step * m.ros.height
     ]
-    assert not torn, f"the file holds a chunk that reads as complete but ends in a truncated message: {torn}"
+    counts = topic_counts(info)
+    readable = {topic: len(got.on(topic)) for topic in sorted({m.topic for m in got.messages})}
+    assert not torn, (
+        f"the file holds a chunk that reads as complete but ends in a truncated message: {torn}; "
+        f"readable per topic {readable}, counted as written in metadata.yaml {counts}"
+    )
+    for topic, count in readable.items():
+        assert count <= counts.get(topic, 0), f"{topic}: {count} messages readable, {counts.get(topic, 0)} counted as written"
     pattern = ImagePattern(640 * 480 * 3)
     for topic in cameras:
         for k, m in enumerate(got.on(topic)):
             assert pattern.matches(bytes(m.ros.data), k), f"{topic} frame {k}: {pattern.first_mismatch(bytes(m.ros.data), k)}"
     for k, m in enumerate(got.on("/joint_states")):
         assert list(m.ros.position) == [k * 0.001 + j for j in range(6)], f"joint_states #{k}"
-    # With the ballast gone the episode could close: the loss is counted.
-    assert (episode / "metadata.yaml").exists(), f"no metadata.yaml after space was freed; files {sorted(p.name for p in episode.iterdir())}\n{log[-3000:]}"
-    info = load_metadata(episode)
-    check_metadata_fields(info, episode)
-    counts = topic_counts(info)
-    for topic in {m.topic for m in got.messages}:
-        assert len(got.on(topic)) <= counts.get(topic, 0), f"{topic}: {len(got.on(topic))} messages readable, {counts.get(topic, 0)} counted as written"
-    report = json.loads((tmp_path / "publisher.out").read_text().strip().splitlines()[-1])
-    dropped = int(info["custom_data"]["dropped_messages"])
-    assert dropped > 0, f"the messages after the full disk are not counted as dropped: {info['custom_data']}"
-    assert info["message_count"] >= len(got.messages), (info["message_count"], len(got.messages))
-    assert info["message_count"] + dropped <= sum(report["published"].values()), (info["message_count"], dropped, report)
 
 
 # =========================================================================== 8. bad input

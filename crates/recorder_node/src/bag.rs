@@ -10,6 +10,7 @@
 use std::{
     collections::{BTreeMap, HashMap},
     fs::File,
+    io::{self, Seek, SeekFrom, Write},
     path::{Path, PathBuf},
     time::{Duration, Instant},
 };
@@ -75,8 +76,43 @@ pub enum BagError {
     NotRecording,
 }
 
+/// The bag file under the MCAP writer. After the first failed write or seek it refuses everything:
+/// the MCAP writer's cleanup (finish on drop) would otherwise go back and rewrite the open chunk's
+/// header over a half-written message, which then reads as a complete one.
+struct GuardedFile {
+    file: File,
+    failed: bool,
+}
+
+impl GuardedFile {
+    fn guard<T>(&mut self, operation: impl FnOnce(&mut File) -> io::Result<T>) -> io::Result<T> {
+        if self.failed {
+            return Err(io::Error::other(
+                "the bag file failed earlier and is closed",
+            ));
+        }
+        operation(&mut self.file).inspect_err(|_| self.failed = true)
+    }
+}
+
+impl Write for GuardedFile {
+    fn write(&mut self, bytes: &[u8]) -> io::Result<usize> {
+        self.guard(|file| file.write(bytes))
+    }
+
+    fn flush(&mut self) -> io::Result<()> {
+        self.guard(|file| file.flush())
+    }
+}
+
+impl Seek for GuardedFile {
+    fn seek(&mut self, position: SeekFrom) -> io::Result<u64> {
+        self.guard(|file| file.seek(position))
+    }
+}
+
 struct OpenFile {
-    writer: Writer<File>,
+    writer: Writer<GuardedFile>,
     path: PathBuf,
     relative: String,
     channels: HashMap<usize, u16>,
@@ -86,6 +122,10 @@ struct OpenFile {
     count: u64,
     sequence: u32,
     chunk_opened: Option<Instant>,
+    /// Topics of the messages in the open chunk (lost together if the disk fails before it
+    /// closes), and its size: chunks are closed here, not by the MCAP writer, so that is known.
+    chunk_topics: Vec<usize>,
+    chunk_bytes: u64,
     since_size_check: u32,
     size: u64,
 }
@@ -193,11 +233,14 @@ impl BagWriter {
             .profile("ros2")
             .library(concat!("so101 recorder_node ", env!("CARGO_PKG_VERSION")))
             .compression(self.options.compression)
-            .chunk_size(Some(self.options.chunk_size))
+            .chunk_size(None)
             // rosbag2's defaults: no chunk or data-section CRCs (each would read every byte again).
             .calculate_chunk_crcs(false)
             .calculate_data_section_crc(false)
-            .create(file)
+            .create(GuardedFile {
+                file,
+                failed: false,
+            })
             .map_err(|source| BagError::Mcap {
                 path: path.clone(),
                 source,
@@ -213,6 +256,8 @@ impl BagWriter {
             count: 0,
             sequence: 0,
             chunk_opened: None,
+            chunk_topics: Vec::new(),
+            chunk_bytes: 0,
             since_size_check: 0,
             size: 0,
         })
@@ -227,8 +272,14 @@ impl BagWriter {
             episode.info.dropped += 1;
             return;
         }
+        let written_before = episode.count;
         if let Err(error) = self.write_in_episode(message) {
-            self.fail(error);
+            // Unless it failed only when its chunk was closed, the message itself is lost too.
+            let counted = self
+                .episode
+                .as_ref()
+                .is_some_and(|episode| episode.count > written_before);
+            self.fail(error, u64::from(!counted));
         }
     }
 
@@ -284,14 +335,27 @@ impl BagWriter {
             .map_err(mcap_error(&file.path))?;
         file.sequence = file.sequence.wrapping_add(1);
         file.count += 1;
-        file.start_ns.get_or_insert(message.log_ns);
+        // Topics are taken one after the other, so a later write may carry an earlier time.
+        file.start_ns = Some(
+            file.start_ns
+                .map_or(message.log_ns, |t| t.min(message.log_ns)),
+        );
         file.last_ns = file.last_ns.max(message.log_ns);
         file.chunk_opened.get_or_insert_with(Instant::now);
         file.size += message.data.len() as u64;
+        file.chunk_topics.push(message.topic);
+        file.chunk_bytes += message.data.len() as u64;
         episode.counts[message.topic] += 1;
         episode.count += 1;
-        episode.first_ns.get_or_insert(message.log_ns);
+        episode.first_ns = Some(
+            episode
+                .first_ns
+                .map_or(message.log_ns, |t| t.min(message.log_ns)),
+        );
         episode.last_ns = episode.last_ns.max(message.log_ns);
+        if file.chunk_bytes >= self.options.chunk_size {
+            close_chunk(file)?;
+        }
         Ok(())
     }
 
@@ -342,10 +406,8 @@ impl BagWriter {
             .chunk_opened
             .is_some_and(|opened| opened.elapsed() >= age)
         {
-            file.chunk_opened = None;
-            if let Err(source) = file.writer.flush() {
-                let path = file.path.clone();
-                self.fail(BagError::Mcap { path, source });
+            if let Err(error) = close_chunk(file) {
+                self.fail(error, 0);
             }
         }
     }
@@ -452,13 +514,24 @@ impl BagWriter {
             .map_err(|source| BagError::Mcap { path, source })
     }
 
-    /// A write failed: say so once, stop writing this episode, keep what is on disk.
-    fn fail(&mut self, error: BagError) {
+    /// A write failed: say so once, stop writing this episode, keep what is on disk. The messages
+    /// of the chunk that was open are not readable: they count as dropped, not as recorded.
+    fn fail(&mut self, error: BagError, messages_lost: u64) {
         let error = error_chain(&error);
         tracing::error!(%error, "recording failed: the episode's file is closed where it stands (chunks written so far stay readable); its remaining messages are dropped");
         if let Some(episode) = self.episode.as_mut() {
             episode.failed = Some(error);
-            episode.info.dropped += 1;
+            episode.info.dropped += messages_lost;
+            if let Some(file) = episode.file.as_mut() {
+                let lost = std::mem::take(&mut file.chunk_topics);
+                for topic in &lost {
+                    episode.counts[*topic] -= 1;
+                }
+                let lost = lost.len() as u64;
+                file.count -= lost;
+                episode.count -= lost;
+                episode.info.dropped += lost;
+            }
         }
         let _ = self.close_file();
     }
@@ -466,6 +539,18 @@ impl BagWriter {
     pub fn failure(&self) -> Option<&str> {
         self.episode.as_ref().and_then(|e| e.failed.as_deref())
     }
+}
+
+/// Writes out the open chunk; its messages are on disk from here on.
+fn close_chunk(file: &mut OpenFile) -> Result<(), BagError> {
+    file.writer.flush().map_err(|source| BagError::Mcap {
+        path: file.path.clone(),
+        source,
+    })?;
+    file.chunk_topics.clear();
+    file.chunk_bytes = 0;
+    file.chunk_opened = None;
+    Ok(())
 }
 
 fn summary(episode: &Episode, topics: &[TopicInfo]) -> BagSummary {

@@ -217,6 +217,9 @@ struct Input {
     topic: usize,
     name: String,
     reader: SimpleDataReader<SerializedMessage, RawAdapter>,
+    /// Log time of the last sample taken: RustDDS's receive instants can step back by
+    /// microseconds when samples arrive reordered, and a topic's log times must not.
+    last_log_ns: u64,
 }
 
 /// The raw subscriptions and their wake-up.
@@ -342,6 +345,7 @@ impl Inputs {
             topic: index,
             name: name.to_owned(),
             reader,
+            last_log_ns: 0,
         });
         tracing::info!(topic = name, r#type = %info.full_name(), "recording topic");
         Ok(())
@@ -354,7 +358,7 @@ impl Inputs {
             std::thread::sleep(RECEIVE_WAIT);
         }
         let mut lost = 0;
-        for input in &self.inputs {
+        for input in &mut self.inputs {
             input.reader.drain_read_notifications();
             loop {
                 let change = match input.reader.try_take_one() {
@@ -372,7 +376,8 @@ impl Inputs {
                     change.writer_guid.to_bytes(),
                     i64::from(change.sequence_number),
                 );
-                let log_ns = ns_from_timestamp(change.receive_instant);
+                let log_ns = ns_from_timestamp(change.receive_instant).max(input.last_log_ns);
+                input.last_log_ns = log_ns;
                 let publish_ns = change.source_timestamp().map_or(log_ns, ns_from_timestamp);
                 let data = change.sample.0;
                 let size = data.len() as u64;
