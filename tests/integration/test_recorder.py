@@ -247,6 +247,46 @@ def test_nothing_is_lost_at_the_stacks_load_and_every_byte_survives(recorder_fac
 
 
 # =========================================================================== 3. /episode/events
+def test_the_bag_directory_opens_in_rosbags_as_a_rosbag2_bag(recorder_factory, tmp_path):
+    """A second, independent reader: rosbags parses metadata.yaml and the MCAP storage the way
+    rosbag2 does, and decodes the CDR with its own Jazzy type definitions."""
+    import numpy as np
+    from rosbags.rosbag2 import Reader
+    from rosbags.typesys import Stores, get_typestore
+
+    recorder = recorder_factory("--start")
+    episode = wait_episode(recorder.output, 0, recorder)
+    report = run_load_publisher(
+        "--cameras", "wrist", "--camera-rate", "30", "--joint-rate", "100", "--duration", "2",
+        "--wait-subscribers", "2", log_path=tmp_path / "load_publisher.log",
+    )  # fmt: skip
+    time.sleep(1.0)
+    assert recorder.stop() == 0, recorder.log_tail()
+    info = load_metadata(episode)
+    store = get_typestore(Stores.ROS2_JAZZY)
+    with Reader(episode) as bag:
+        assert bag.message_count == info["message_count"] == sum(report["published"].values())
+        assert bag.duration > 1_500_000_000, bag.duration
+        counts = {c.topic: c.msgcount for c in bag.connections}
+        assert counts == report["published"], counts
+        assert {c.topic: c.msgtype for c in bag.connections} == {
+            "/joint_states": "sensor_msgs/msg/JointState",
+            "/camera/wrist/image_raw": "sensor_msgs/msg/Image",
+        }
+        joints, images = 0, 0
+        for connection, _, raw in bag.messages():
+            message = store.deserialize_cdr(raw, connection.msgtype)
+            if connection.topic == "/joint_states":
+                assert list(message.position) == [joints * 0.001 + j for j in range(6)]
+                joints += 1
+            else:
+                assert (message.height, message.width, message.encoding) == (480, 640, "rgb8")
+                expected = ((np.arange(16) * 7 + images) % 256).astype(np.uint8)
+                assert np.array_equal(message.data[:16], expected), f"image {images}"
+                images += 1
+    assert (joints, images) == (report["published"]["/joint_states"], report["published"]["/camera/wrist/image_raw"])
+
+
 def test_episodes_follow_the_events_topic(recorder_factory, ros):
     from rclpy.serialization import deserialize_message
     from sensor_msgs.msg import JointState
