@@ -34,7 +34,7 @@ SIM_RECORDED_TOPICS = {
     "/cube/pose": "geometry_msgs/msg/PoseStamped",
     "/diagnostics": "diagnostic_msgs/msg/DiagnosticArray",
 }
-CUSTOM_DATA_KEYS = {"episode_index", "task", "success", "seed", "start_time_ns", "stop_time_ns", "dropped_messages"}
+CUSTOM_DATA_KEYS = {"episode_index", "task", "success", "seed", "start_time_ns", "stop_time_ns", "dropped_messages", "error"}
 # The keys of one rosbag2 (Jazzy) QoS profile.
 QOS_KEYS = {
     "history",

@@ -563,6 +563,9 @@ def test_a_full_disk_is_reported_and_what_was_written_stays_readable(tmp_path, r
     errors = [line for line in log.splitlines() if "No space left on device" in line]
     assert errors, f"no log line names the OS error (No space left on device):\n{log[-4000:]}"
     assert any("error" in line.lower() for line in errors), errors
+    # Stopping the failed episode says it failed, and why; the rest succeeds.
+    failed_stop = answers.pop("stop failed episode")
+    assert not failed_stop.success and "No space left on device" in failed_stop.message, failed_stop.message
     for what, answer in answers.items():
         assert answer.success, f"{what}: {answer.message}\n{log[-3000:]}"
 
@@ -574,6 +577,7 @@ def test_a_full_disk_is_reported_and_what_was_written_stays_readable(tmp_path, r
     report = json.loads((tmp_path / "publisher.out").read_text().strip().splitlines()[-1])
     dropped = int(info["custom_data"]["dropped_messages"])
     assert dropped > 0, f"the messages after the full disk are not counted as dropped: {info['custom_data']}"
+    assert "No space left on device" in info["custom_data"]["error"], info["custom_data"]
     # Every published message reached the recorder (reliable): written, or counted as dropped.
     assert info["message_count"] + dropped == sum(report["published"].values()), (info["message_count"], dropped, report)
     # The next episode is a complete bag.

@@ -74,6 +74,8 @@ pub enum BagError {
     },
     #[error("no episode is being recorded")]
     NotRecording,
+    #[error("episode {index} stopped, but its recording failed: {error}")]
+    Failed { index: u64, error: String },
 }
 
 /// The bag file under the MCAP writer. After the first failed write or seek it refuses everything:
@@ -181,19 +183,32 @@ impl BagWriter {
         self.episode.is_some()
     }
 
-    /// Starts a new episode (a running one is stopped first). Returns its directory.
-    pub fn start(&mut self, options: StartOptions, now_ns: u64) -> Result<PathBuf, BagError> {
+    /// Starts a new episode (a running one is stopped first, with `success_hint`). Returns its
+    /// directory.
+    pub fn start(
+        &mut self,
+        options: StartOptions,
+        now_ns: u64,
+        success_hint: Option<bool>,
+    ) -> Result<PathBuf, BagError> {
         if self.episode.is_some() {
-            self.stop(now_ns, None)?;
+            if let Err(error) = self.stop(now_ns, success_hint) {
+                tracing::warn!(error = %error_chain(&error), "the previous episode ended with an error");
+            }
         }
-        let index = self.next_index;
-        self.next_index += 1;
-        let name = format!("{}_{index:06}", self.options.prefix);
-        let dir = self.options.output.join(&name);
-        std::fs::create_dir_all(&dir).map_err(|source| BagError::Create {
-            path: dir.clone(),
-            source,
-        })?;
+        // Claimed with create_dir, not create_dir_all: another recorder on the same directory
+        // takes the next number instead of writing into this one.
+        let (index, name, dir) = loop {
+            let index = self.next_index;
+            self.next_index += 1;
+            let name = format!("{}_{index:06}", self.options.prefix);
+            let dir = self.options.output.join(&name);
+            match std::fs::create_dir(&dir) {
+                Ok(()) => break (index, name, dir),
+                Err(error) if error.kind() == io::ErrorKind::AlreadyExists => continue,
+                Err(source) => return Err(BagError::Create { path: dir, source }),
+            }
+        };
         let mut episode = Episode {
             info: EpisodeInfo {
                 index,
@@ -205,6 +220,7 @@ impl BagWriter {
                 start_ns: now_ns,
                 stop_ns: None,
                 dropped: 0,
+                error: None,
             },
             dir: dir.clone(),
             name,
@@ -216,7 +232,13 @@ impl BagWriter {
             count: 0,
             failed: None,
         };
-        episode.file = Some(self.open_file(&episode)?);
+        match self.open_file(&episode) {
+            Ok(file) => episode.file = Some(file),
+            Err(error) => {
+                let _ = std::fs::remove_dir_all(&dir);
+                return Err(error);
+            }
+        }
         tracing::info!(episode = index, dir = %dir.display(), task = %episode.info.task, "episode started");
         self.episode = Some(episode);
         Ok(dir)
@@ -270,6 +292,10 @@ impl BagWriter {
         };
         if episode.failed.is_some() {
             episode.info.dropped += 1;
+            return;
+        }
+        // Received before the episode began (queued while it was being started): not part of it.
+        if message.log_ns < episode.info.start_ns {
             return;
         }
         let written_before = episode.count;
@@ -368,7 +394,9 @@ impl BagWriter {
         let Some(file) = episode.file.as_mut() else {
             return Ok(());
         };
-        file.since_size_check += 1;
+        if split_size.is_some() {
+            file.since_size_check += 1;
+        }
         if split_size.is_some() && file.since_size_check >= SIZE_CHECK_EVERY {
             file.since_size_check = 0;
             // The real size (compression makes the message bytes an overestimate).
@@ -437,9 +465,10 @@ impl BagWriter {
             episode.info.success = success_hint;
         }
         let closed = self.close_file();
-        let Some(episode) = self.episode.take() else {
+        let Some(mut episode) = self.episode.take() else {
             return Err(BagError::NotRecording);
         };
+        episode.info.error = episode.failed.clone();
         let metadata = write_metadata_yaml(&episode, &self.topics);
         tracing::info!(
             episode = episode.info.index,
@@ -449,7 +478,14 @@ impl BagWriter {
             dir = %episode.dir.display(),
             "episode stopped"
         );
-        closed.and(metadata).map(|()| episode.info)
+        closed.and(metadata)?;
+        match episode.failed {
+            Some(error) => Err(BagError::Failed {
+                index: episode.info.index,
+                error,
+            }),
+            None => Ok(episode.info),
+        }
     }
 
     /// Ends the episode and deletes its directory.
@@ -477,6 +513,18 @@ impl BagWriter {
         let Some(mut file) = episode.file.take() else {
             return Ok(());
         };
+        // The open chunk first: if it cannot be written, its messages are not in the file.
+        let chunk = if episode.failed.is_none() {
+            close_chunk(&mut file)
+        } else {
+            Ok(())
+        };
+        if let Err(error) = &chunk {
+            let text = error_chain(error);
+            tracing::error!(error = %text, "closing the bag file failed: its last chunk is lost");
+            lose_open_chunk(episode, &mut file);
+            episode.failed = Some(text);
+        }
         let start = file.start_ns.unwrap_or(episode.info.start_ns);
         episode.files.push(FileSummary {
             path: file.relative.clone(),
@@ -485,8 +533,8 @@ impl BagWriter {
             message_count: file.count,
         });
         if episode.failed.is_some() {
-            // Finishing would write a summary after a failed write; the file stays as it is.
-            return Ok(());
+            // Nothing more reaches a file after a failed write (see GuardedFile).
+            return chunk;
         }
         let bag = summary(episode, &self.topics);
         let records = [
@@ -522,15 +570,9 @@ impl BagWriter {
         if let Some(episode) = self.episode.as_mut() {
             episode.failed = Some(error);
             episode.info.dropped += messages_lost;
-            if let Some(file) = episode.file.as_mut() {
-                let lost = std::mem::take(&mut file.chunk_topics);
-                for topic in &lost {
-                    episode.counts[*topic] -= 1;
-                }
-                let lost = lost.len() as u64;
-                file.count -= lost;
-                episode.count -= lost;
-                episode.info.dropped += lost;
+            if let Some(mut file) = episode.file.take() {
+                lose_open_chunk(episode, &mut file);
+                episode.file = Some(file);
             }
         }
         let _ = self.close_file();
@@ -539,6 +581,18 @@ impl BagWriter {
     pub fn failure(&self) -> Option<&str> {
         self.episode.as_ref().and_then(|e| e.failed.as_deref())
     }
+}
+
+/// The open chunk's messages will never be readable: they count as dropped, not as recorded.
+fn lose_open_chunk(episode: &mut Episode, file: &mut OpenFile) {
+    let lost = std::mem::take(&mut file.chunk_topics);
+    for topic in &lost {
+        episode.counts[*topic] -= 1;
+    }
+    let lost = lost.len() as u64;
+    file.count -= lost;
+    episode.count -= lost;
+    episode.info.dropped += lost;
 }
 
 /// Writes out the open chunk; its messages are on disk from here on.
@@ -653,7 +707,7 @@ mod tests {
         std::fs::create_dir(dir.path().join("episode_000004")).unwrap();
         let mut bag = BagWriter::new(options(dir.path())).unwrap();
         bag.add_topic(topic());
-        let episode = bag.start(StartOptions::default(), 0).unwrap();
+        let episode = bag.start(StartOptions::default(), 0, None).unwrap();
         assert!(episode.ends_with("episode_000005"));
         for i in 0..30u64 {
             bag.write(&Message {
@@ -682,14 +736,35 @@ mod tests {
     }
 
     #[test]
+    fn two_recorders_on_one_directory_never_share_an_episode() {
+        let dir = tempfile::tempdir().unwrap();
+        let mut first = BagWriter::new(options(dir.path())).unwrap();
+        let mut second = BagWriter::new(options(dir.path())).unwrap();
+        let a = first.start(StartOptions::default(), 0, None).unwrap();
+        let b = second.start(StartOptions::default(), 0, None).unwrap();
+        assert_ne!(a, b);
+        assert!(b.ends_with("episode_000001"));
+    }
+
+    #[test]
+    fn a_start_that_ends_an_episode_passes_on_its_success() {
+        let dir = tempfile::tempdir().unwrap();
+        let mut bag = BagWriter::new(options(dir.path())).unwrap();
+        let first = bag.start(StartOptions::default(), 0, None).unwrap();
+        bag.start(StartOptions::default(), 10, Some(true)).unwrap();
+        let yaml = std::fs::read_to_string(first.join("metadata.yaml")).unwrap();
+        assert!(yaml.contains("\"success\": \"true\""), "{yaml}");
+    }
+
+    #[test]
     fn a_discarded_episode_leaves_nothing_and_its_number_is_reused() {
         let dir = tempfile::tempdir().unwrap();
         let mut bag = BagWriter::new(options(dir.path())).unwrap();
         bag.add_topic(topic());
-        let first = bag.start(StartOptions::default(), 0).unwrap();
+        let first = bag.start(StartOptions::default(), 0, None).unwrap();
         assert_eq!(bag.discard().unwrap(), 0);
         assert!(!first.exists());
-        let again = bag.start(StartOptions::default(), 0).unwrap();
+        let again = bag.start(StartOptions::default(), 0, None).unwrap();
         assert_eq!(again, first);
         // Messages outside an episode are not kept; the marker needs an episode.
         bag.stop(1, None).unwrap();

@@ -74,8 +74,10 @@ pub struct EpisodeInfo {
     pub success: Option<bool>,
     pub start_ns: u64,
     pub stop_ns: Option<u64>,
-    /// Samples known lost (sequence gaps, full queue).
+    /// Samples known lost (sequence gaps, full queue, a failed write).
     pub dropped: u64,
+    /// Why the recording failed, if it did (a full disk).
+    pub error: Option<String>,
 }
 
 impl EpisodeInfo {
@@ -100,6 +102,7 @@ impl EpisodeInfo {
                 self.stop_ns.map_or(String::new(), |ns| ns.to_string()),
             ),
             ("dropped_messages".into(), self.dropped.to_string()),
+            ("error".into(), self.error.clone().unwrap_or_default()),
         ]
     }
 }
@@ -144,6 +147,7 @@ mod tests {
             start_ns: 10,
             stop_ns: Some(20),
             dropped: 0,
+            error: None,
         };
         let data = info.custom_data();
         assert!(data.contains(&("success".into(), "unknown".into())));

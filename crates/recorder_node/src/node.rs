@@ -52,7 +52,8 @@ type Reply = SyncSender<Result<String, String>>;
 enum Command {
     Topic(TopicInfo),
     Message(Message),
-    Start(StartOptions, u64, Option<Reply>),
+    /// Start options, time, the success hint for an episode this start ends, reply.
+    Start(StartOptions, u64, Option<bool>, Option<Reply>),
     Stop(u64, Option<bool>, Option<Reply>),
     Mark(bool, Option<Reply>),
     Discard(Option<Reply>),
@@ -102,11 +103,21 @@ pub fn run(args: Args) -> Result<()> {
     }
     tracing::info!(output = %args.output.display(), compression = ?args.compression, "recorder ready");
     if args.start {
-        control
-            .request(&sender, |reply| {
-                Command::Start(StartOptions::default(), now_ns(), Some(reply))
-            })
-            .map_err(|error| anyhow::anyhow!("cannot start recording: {error}"))?;
+        let (reply, answer) = sync_channel(1);
+        sender
+            .send(Command::Start(
+                StartOptions::default(),
+                now_ns(),
+                None,
+                Some(reply),
+            ))
+            .map_err(|_| anyhow::anyhow!("the writer thread is gone"))?;
+        let started = answer
+            .recv_timeout(REPLY_TIMEOUT)
+            .unwrap_or_else(|_| Err("the writer did not answer in time".to_owned()));
+        let message =
+            started.map_err(|error| anyhow::anyhow!("cannot start recording: {error}"))?;
+        tracing::info!("{message}");
     }
     let deadline = args.duration.map(|s| Instant::now() + seconds(s));
     let mut next_discovery = Instant::now();
@@ -155,9 +166,9 @@ fn spawn_writer(
                     bag.write(&message);
                 }
                 Ok(Command::Topic(topic)) => bag.add_topic(topic),
-                Ok(Command::Start(options, at, reply)) => answer(
+                Ok(Command::Start(options, at, hint, reply)) => answer(
                     reply,
-                    bag.start(options, at)
+                    bag.start(options, at, hint)
                         .map(|dir| format!("recording into {}", dir.display())),
                 ),
                 Ok(Command::Stop(at, hint, reply)) => answer(
@@ -233,6 +244,8 @@ struct Inputs {
     selection: Selection,
     gaps: GapTracker,
     dropped: u64,
+    /// Losses not yet handed to the writer (its queue was full).
+    unreported: u64,
     warnings: RateLimiter,
 }
 
@@ -252,6 +265,7 @@ impl Inputs {
             selection,
             gaps: GapTracker::default(),
             dropped: 0,
+            unreported: 0,
             warnings: RateLimiter::new(Duration::from_secs(2)),
         })
     }
@@ -263,6 +277,9 @@ impl Inputs {
     ) -> Result<()> {
         for (relative, type_name) in DEFAULT_FIXED {
             let name = node.names().resolve(relative);
+            if !self.selection.wants(&name) {
+                continue;
+            }
             if let Some(info) = known_type(type_name) {
                 self.subscribe(node, &name, info, commands)?;
             }
@@ -284,6 +301,8 @@ impl Inputs {
             match known_type(&type_name) {
                 Some(info) => {
                     if let Err(error) = self.subscribe(node, &name, info, commands) {
+                        // Said once: retrying every second would only repeat it.
+                        self.seen.insert(name.clone());
                         tracing::warn!(topic = %name, %error, "cannot subscribe");
                     }
                 }
@@ -410,13 +429,18 @@ impl Inputs {
                     "messages lost (sequence gaps or a full writer queue)"
                 );
             }
-            let _ = commands.send(Command::Dropped(lost));
+            // Never wait here: what does not fit now is reported with the next loss.
+            self.unreported += lost;
+            if commands.try_send(Command::Dropped(self.unreported)).is_ok() {
+                self.unreported = 0;
+            }
         }
     }
 }
 
 /// Episode control: /episode/events, /task/success (the default for an unmarked episode) and the
-/// recorder's services.
+/// recorder's services. Nothing here waits for the writer: events are sent and forgotten, service
+/// calls are answered once the writer's reply arrives, on a later turn of the loop.
 struct Control {
     events: Subscription<StringMessage>,
     task_success: Subscription<Bool>,
@@ -425,7 +449,24 @@ struct Control {
     discard: Server<TriggerRequest, TriggerResponse>,
     mark_success: Server<SetBoolRequest, TriggerResponse>,
     last_task_success: Option<bool>,
+    pending: Vec<PendingCall>,
     warnings: RateLimiter,
+}
+
+#[derive(Clone, Copy)]
+enum Service {
+    Start,
+    Stop,
+    Discard,
+    MarkSuccess,
+}
+
+/// A service call waiting for the writer's answer.
+struct PendingCall {
+    service: Service,
+    id: ros2_client::RmwRequestId,
+    answer: Receiver<Result<String, String>>,
+    deadline: Instant,
 }
 
 impl Control {
@@ -438,28 +479,9 @@ impl Control {
             discard: node.server::<Trigger>("recorder/discard")?,
             mark_success: node.server::<SetBool>("recorder/mark_success")?,
             last_task_success: None,
+            pending: Vec::new(),
             warnings: RateLimiter::new(Duration::from_secs(1)),
         })
-    }
-
-    /// Sends a command and waits for the writer's answer.
-    fn request(
-        &mut self,
-        commands: &SyncSender<Command>,
-        command: impl FnOnce(Reply) -> Command,
-    ) -> Result<String, String> {
-        let (reply, answer) = sync_channel(1);
-        commands
-            .send(command(reply))
-            .map_err(|_| "the writer thread is gone".to_owned())?;
-        let result = answer
-            .recv_timeout(REPLY_TIMEOUT)
-            .unwrap_or_else(|_| Err("the writer did not answer in time".to_owned()));
-        match &result {
-            Ok(message) => tracing::info!("{message}"),
-            Err(error) => tracing::warn!("{error}"),
-        }
-        result
     }
 
     fn take(&mut self, commands: &SyncSender<Command>) {
@@ -468,9 +490,7 @@ impl Control {
         }
         while let Ok(Some((message, _))) = self.events.take() {
             match parse_event(&message.data) {
-                Ok(event) => {
-                    let _ = self.apply(event, commands);
-                }
+                Ok(event) => self.apply(event, commands, None),
                 Err(error) => {
                     if let Some(suppressed) = self.warnings.check(Instant::now()) {
                         tracing::warn!(suppressed, "episode event ignored: {error}");
@@ -478,68 +498,91 @@ impl Control {
                 }
             }
         }
-        let triggers = [
-            (0, take_trigger(&self.start)),
-            (1, take_trigger(&self.stop)),
-            (2, take_trigger(&self.discard)),
-        ];
-        for (which, requests) in triggers {
-            for id in requests {
-                let event = match which {
-                    0 => EpisodeEvent::Start(StartOptions::default()),
-                    1 => EpisodeEvent::Stop,
-                    _ => EpisodeEvent::Discard,
-                };
-                let result = self.apply(event, commands);
-                let server = match which {
-                    0 => &self.start,
-                    1 => &self.stop,
-                    _ => &self.discard,
-                };
-                respond(server, id, result);
-            }
-        }
+        // Calls on different services carry no common order; this one makes "mark, then stop"
+        // and "stop, then start" do what they say.
+        let mut calls: Vec<(Service, ros2_client::RmwRequestId, EpisodeEvent)> = Vec::new();
         while let Ok(Some((id, request))) = self.mark_success.receive_request() {
             let event = if request.data {
                 EpisodeEvent::Success
             } else {
                 EpisodeEvent::Failure
             };
-            let result = self.apply(event, commands);
-            respond(&self.mark_success, id, result);
+            calls.push((Service::MarkSuccess, id, event));
         }
+        for id in take_trigger(&self.stop) {
+            calls.push((Service::Stop, id, EpisodeEvent::Stop));
+        }
+        for id in take_trigger(&self.discard) {
+            calls.push((Service::Discard, id, EpisodeEvent::Discard));
+        }
+        for id in take_trigger(&self.start) {
+            calls.push((
+                Service::Start,
+                id,
+                EpisodeEvent::Start(StartOptions::default()),
+            ));
+        }
+        for (service, id, event) in calls {
+            let (reply, answer) = sync_channel(1);
+            self.apply(event, commands, Some(reply));
+            self.pending.push(PendingCall {
+                service,
+                id,
+                answer,
+                deadline: Instant::now() + REPLY_TIMEOUT,
+            });
+        }
+        self.answer_ready();
     }
 
-    fn apply(
-        &mut self,
-        event: EpisodeEvent,
-        commands: &SyncSender<Command>,
-    ) -> Result<String, String> {
-        match event {
+    /// Answers the service calls whose reply from the writer has arrived (or is overdue).
+    fn answer_ready(&mut self) {
+        let now = Instant::now();
+        let mut still_waiting = Vec::new();
+        for call in std::mem::take(&mut self.pending) {
+            let result = match call.answer.try_recv() {
+                Ok(result) => result,
+                Err(std::sync::mpsc::TryRecvError::Empty) if now < call.deadline => {
+                    still_waiting.push(call);
+                    continue;
+                }
+                Err(_) => Err("the writer did not answer in time".to_owned()),
+            };
+            match &result {
+                Ok(message) => tracing::info!("{message}"),
+                Err(error) => tracing::warn!("{error}"),
+            }
+            match call.service {
+                Service::Start => respond(&self.start, call.id, result),
+                Service::Stop => respond(&self.stop, call.id, result),
+                Service::Discard => respond(&self.discard, call.id, result),
+                Service::MarkSuccess => respond(&self.mark_success, call.id, result),
+            }
+        }
+        self.pending = still_waiting;
+    }
+
+    /// Hands an episode event to the writer, in order with the messages already queued.
+    fn apply(&mut self, event: EpisodeEvent, commands: &SyncSender<Command>, reply: Option<Reply>) {
+        let command = match event {
             EpisodeEvent::Start(options) => {
-                self.last_task_success = None;
-                self.request(commands, |reply| {
-                    Command::Start(options, now_ns(), Some(reply))
-                })
+                let hint = self.last_task_success.take();
+                Command::Start(options, now_ns(), hint, reply)
             }
-            EpisodeEvent::Stop => {
-                let hint = self.last_task_success;
-                self.request(commands, |reply| Command::Stop(now_ns(), hint, Some(reply)))
-            }
-            EpisodeEvent::Success => {
-                self.request(commands, |reply| Command::Mark(true, Some(reply)))
-            }
-            EpisodeEvent::Failure => {
-                self.request(commands, |reply| Command::Mark(false, Some(reply)))
-            }
-            EpisodeEvent::Discard => self.request(commands, |reply| Command::Discard(Some(reply))),
+            EpisodeEvent::Stop => Command::Stop(now_ns(), self.last_task_success, reply),
+            EpisodeEvent::Success => Command::Mark(true, reply),
+            EpisodeEvent::Failure => Command::Mark(false, reply),
+            EpisodeEvent::Discard => Command::Discard(reply),
             EpisodeEvent::Rerecord => {
-                let _ = self.request(commands, |reply| Command::Discard(Some(reply)));
+                if commands.send(Command::Discard(None)).is_err() {
+                    return;
+                }
                 self.last_task_success = None;
-                self.request(commands, |reply| {
-                    Command::Start(StartOptions::default(), now_ns(), Some(reply))
-                })
+                Command::Start(StartOptions::default(), now_ns(), None, reply)
             }
+        };
+        if commands.send(command).is_err() {
+            tracing::error!("the writer thread is gone: an episode event was lost");
         }
     }
 }

@@ -140,7 +140,7 @@ fn run(args: Args) -> Result<()> {
         bag.add_topic(topic);
     }
     let started = Instant::now();
-    let dir = bag.start(StartOptions::default(), 0)?;
+    let dir = bag.start(StartOptions::default(), 0, None)?;
     for message in &messages {
         bag.write(message);
         bag.tick();
