@@ -29,9 +29,9 @@ from harness import (  # noqa: E402
     REPO_ROOT,
     Probe,
     SimNode,
-    describe_returncode,
     network_namespace_problem,
     node_binary,
+    stop_nodes,
 )
 
 # Fast DDS profile (large socket buffers) and RMW for every rclpy participant of the run; set before
@@ -87,13 +87,7 @@ def sim_factory(request: pytest.FixtureRequest, tmp_path: Path):
 
     yield start
 
-    problems = []
-    for node in nodes:
-        was_running = node.alive()
-        code = node.stop()
-        if code != 0:
-            how = "after SIGINT" if was_running else "by itself during the test (crash or early exit)"
-            problems.append(f"{node.describe()} ended {how} with {describe_returncode(code)}; its output:\n{node.log_tail()}")
+    problems = stop_nodes(nodes)
     if problems:
         pytest.fail("\n\n".join(problems), pytrace=False)
 
@@ -134,13 +128,7 @@ def arm_factory(request: pytest.FixtureRequest, tmp_path: Path):
 
     yield start
 
-    problems = []
-    for node in nodes:
-        was_running = node.alive()
-        code = node.stop()
-        if code != 0 and not getattr(node, "exit_expected", False):
-            how = "after SIGINT" if was_running else "by itself during the test"
-            problems.append(f"{node.describe()} ended {how} with {describe_returncode(code)}; its output:\n{node.log_tail()}")
+    problems = stop_nodes(nodes)
     for emulator in emulators:
         emulator.stop()
     if problems:
@@ -166,13 +154,7 @@ def recorder_factory(request: pytest.FixtureRequest, tmp_path: Path):
 
     yield start
 
-    problems = []
-    for node in nodes:
-        was_running = node.alive()
-        code = node.stop()
-        if code != 0 and not getattr(node, "exit_expected", False):
-            how = "after SIGINT" if was_running else "by itself during the test"
-            problems.append(f"{node.describe()} ended {how} with {describe_returncode(code)}; its output:\n{node.log_tail()}")
+    problems = stop_nodes(nodes)
     if problems:
         pytest.fail("\n\n".join(problems), pytrace=False)
 

@@ -206,6 +206,19 @@ class SimNode:
         return self._stop_result
 
 
+def stop_nodes(nodes: list[SimNode]) -> list[str]:
+    """SIGINT to every node still running; what went wrong, for the fixture to report. A node must
+    exit 0, unless its test set `node.exit_expected = True` (it was killed or meant to fail)."""
+    problems = []
+    for node in nodes:
+        was_running = node.alive()
+        code = node.stop()
+        if code != 0 and not getattr(node, "exit_expected", False):
+            how = "after SIGINT" if was_running else "by itself during the test (crash or early exit)"
+            problems.append(f"{node.describe()} ended {how} with {describe_returncode(code)}; its output:\n{node.log_tail()}")
+    return problems
+
+
 def describe_returncode(code: int | None) -> str:
     if code is None:
         return "no exit (killed after not stopping on SIGINT)"
