@@ -1,9 +1,10 @@
 #!/usr/bin/env bash
 # Run the benchmarks of docs/benchmarks.md (set-up first), all peers in one private network namespace.
-#   scripts/bench.sh                     both, with their defaults
+#   scripts/bench.sh                     all of them, with their defaults
 #   scripts/bench.sh sim [--repeats N] [--seconds S] [--samples N] [--json FILE]
 #   scripts/bench.sh driver [--repeats N] [--seconds S] [--baud B] [--json FILE]
 #   scripts/bench.sh recorder [--seconds S] [--repeats N] [--workdir DIR] [--json FILE]
+#   scripts/bench.sh cameras [--repeats N] [--seconds S] [--frames N] [--json FILE]
 set -euo pipefail
 . "$(dirname "${BASH_SOURCE[0]}")/common.sh"
 REPO_ROOT="${SO101_ROOT}"
@@ -13,7 +14,7 @@ run() {
         --bin-dir "${CARGO_TARGET_DIR}/release" "${@:2}"
 }
 case "${1:-all}" in
-    sim | driver | recorder) run "$@" ;;
-    all) run sim && run driver && run recorder ;;
-    *) echo "usage: scripts/bench.sh [sim|driver|recorder] [ARGS...]" >&2; exit 2 ;;
+    sim | driver | recorder | cameras) run "$@" ;;
+    all) run sim && run driver && run recorder && run cameras ;;
+    *) echo "usage: scripts/bench.sh [sim|driver|recorder|cameras] [ARGS...]" >&2; exit 2 ;;
 esac

@@ -229,6 +229,8 @@ def spawn_node(node_args: list[str], full_scene: bool = False) -> subprocess.Pop
     args = list(node_args)
     if not full_scene and "--lite" not in args:
         args.insert(0, "--lite")
+    if "--cameras" not in args:
+        args[:0] = ["--cameras", "none"]
     return subprocess.Popen([str(binary), *args], env=env, cwd=REPO_ROOT)
 
 

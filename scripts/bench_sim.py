@@ -44,7 +44,7 @@ def testspeed_steps_per_second(steps: int) -> float:
 
 
 def node_steps_per_second(bin_dir: Path, seconds: float, with_subscriber: bool) -> float:
-    node = subprocess.Popen([str(bin_dir / "so101_sim_node"), "--speed", "max", "--duration", str(seconds)],
+    node = subprocess.Popen([str(bin_dir / "so101_sim_node"), "--cameras", "none", "--speed", "max", "--duration", str(seconds)],
                             env=node_env(), stderr=subprocess.PIPE, text=True)
     subscriber = None
     if with_subscriber:
@@ -82,7 +82,7 @@ print(count[0])
 
 def start_node(bin_dir: Path, rate: float) -> subprocess.Popen:
     log = tempfile.TemporaryFile(mode="w+")
-    node = subprocess.Popen([str(bin_dir / "so101_sim_node"), "--lite", "--rate", str(rate)],
+    node = subprocess.Popen([str(bin_dir / "so101_sim_node"), "--lite", "--cameras", "none", "--rate", str(rate)],
                             env=node_env(), stderr=log)
     time.sleep(1.0)  # the node is up and announcing before the client starts
     if node.poll() is not None:

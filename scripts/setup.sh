@@ -11,8 +11,9 @@ set -euo pipefail
 
 . "$(dirname "${BASH_SOURCE[0]}")/common.sh"
 REPO_ROOT="${SO101_ROOT}"
-APT_PACKAGES=(libmujoco-dev libmujoco-samples libclang-dev gcc libc6-dev iproute2 util-linux python3-venv)
-MIN_RUST=1.85.0
+APT_PACKAGES=(libmujoco-dev libmujoco-samples libclang-dev gcc libc6-dev iproute2 util-linux python3-venv
+              libegl1 libegl-mesa0 libgl1-mesa-dri libosmesa6)
+MIN_RUST=1.87.0
 
 log() { printf '\033[1msetup:\033[0m %s\n' "$*" >&2; }
 die() { printf 'setup: ERROR: %s\n' "$*" >&2; exit 1; }

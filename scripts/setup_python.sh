@@ -48,7 +48,9 @@ else
         die "no CPython 3.11 or 3.12 found (tried python3, python3.12, python3.11); set PYTHON=/path/to/python3.11"
 fi
 
-WANT="requirements=$(sha256_of "${REQUIREMENTS}") python=${PY_VERSION}"
+# The .pth hook written below is part of what a venv must have: bump its version when it changes.
+PTH_VERSION=1
+WANT="requirements=$(sha256_of "${REQUIREMENTS}") python=${PY_VERSION} pth=${PTH_VERSION}"
 
 # Fast path: nothing changed since the last successful run.
 if [ -x "${VENV}/bin/python" ] && [ -f "${STAMP}" ] && [ "$(cat "${STAMP}")" = "${WANT}" ]; then
@@ -86,6 +88,14 @@ rm -f "${STAMP}"
 log "installing ${REQUIREMENTS#"${REPO_ROOT}"/}"
 "${VENV}/bin/python" -m pip install --quiet --disable-pip-version-check -r "${REQUIREMENTS}"
 
+# Every Python process of the venv gets the project's Fast DDS profile (4 MiB socket buffers, so
+# rclpy receives camera images from the Rust nodes) and RMW unless its environment names others:
+# scripts, tests and one-off `python -c` alike, with no environment to source.
+SITE_PACKAGES="$("${VENV}/bin/python" -c 'import sysconfig; print(sysconfig.get_paths()["purelib"])')"
+cat >"${SITE_PACKAGES}/so101_ros_defaults.pth" <<EOF
+import os; os.environ.setdefault("FASTRTPS_DEFAULT_PROFILES_FILE", "${REPO_ROOT}/scripts/fastdds_profile.xml"); os.environ.setdefault("RMW_IMPLEMENTATION", "rmw_fastrtps_cpp")
+EOF
+
 # Smoke test: the wheels import and the Fast DDS RMW library loads. No DDS participant is opened
 # here (rclpy.init alone creates none), so this is safe outside a network namespace.
 "${VENV}/bin/python" - <<'EOF'
@@ -100,6 +110,8 @@ from geometry_msgs.msg import PoseStamped  # noqa: F401
 import pytest  # noqa: F401
 rmw = get_rmw_implementation_identifier()
 assert rmw == "rmw_fastrtps_cpp", rmw
+import os
+assert os.environ["FASTRTPS_DEFAULT_PROFILES_FILE"].endswith("scripts/fastdds_profile.xml"), os.environ
 EOF
 
 printf '%s\n' "${WANT}" >"${STAMP}"

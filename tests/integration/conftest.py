@@ -69,7 +69,7 @@ def pytest_collection_finish(session: pytest.Session) -> None:
 @pytest.fixture
 def sim_factory(request: pytest.FixtureRequest, tmp_path: Path):
     """start(*args, lite=True) -> SimNode: starts $SO101_BIN_DIR/so101_sim_node with the given flags
-    (`--lite` added unless lite=False). At teardown every node still running gets SIGINT and must
+    (`--lite` added unless lite=False, `--cameras none` unless the flags name cameras). At teardown every node still running gets SIGINT and must
     exit with return code 0; a node that died during the test fails it too."""
     binary: list[Path] = []
     nodes: list[SimNode] = []
@@ -81,6 +81,9 @@ def sim_factory(request: pytest.FixtureRequest, tmp_path: Path):
         argv = [str(a) for a in args]
         if lite and "--lite" not in argv:
             argv.insert(0, "--lite")
+        # Rendering is tested where a test asks for cameras; elsewhere it would only load the CPU.
+        if not any(a == "--cameras" or a.startswith("--cameras=") for a in argv):
+            argv[:0] = ["--cameras", "none"]
         node = SimNode(binary[0], argv, tmp_path / f"so101_sim_node.{len(nodes)}.log")
         nodes.append(node)
         return node

@@ -5,6 +5,8 @@ use std::path::PathBuf;
 use so101_core::ros::NodeArgs;
 
 use crate::{
+    cameras::spec::{self, CameraList, FrameSize},
+    offscreen::RendererChoice,
     pacing::{self, TimeMode},
     task::TaskKind,
 };
@@ -41,6 +43,32 @@ pub struct Args {
     /// Play the built-in pick-and-place demo until the first external command arrives.
     #[arg(long)]
     pub demo: bool,
+    /// Cameras to render, comma-separated: NAME[:WIDTHxHEIGHT][@RATE] (e.g.
+    /// "top,front:320x240,wrist@15"), or "none". Each publishes /camera/NAME/image_raw (rgb8) and
+    /// /camera/NAME/camera_info, stamped with sim time.
+    #[arg(long, default_value = "top,front,wrist", value_parser = spec::parse_camera_list)]
+    pub cameras: CameraList,
+    /// Frame size of the cameras that do not name one.
+    #[arg(long, default_value = "640x480", value_parser = spec::parse_size)]
+    pub camera_size: FrameSize,
+    /// Frames per second of sim time of the cameras that do not name a rate. In real time, frames
+    /// the renderer cannot keep up with are skipped (and counted in /diagnostics); in lockstep and
+    /// --speed modes the physics waits for them.
+    #[arg(long, default_value_t = 30.0, value_parser = spec::parse_rate)]
+    pub camera_rate: f64,
+    /// Also publish JPEG (sensor_msgs/CompressedImage) on /camera/NAME/image_raw/compressed.
+    #[arg(long)]
+    pub jpeg: bool,
+    /// JPEG quality, 1-100.
+    #[arg(long, default_value_t = 90, value_parser = clap::value_parser!(u8).range(1..=100))]
+    pub jpeg_quality: u8,
+    /// Headless OpenGL platform: EGL (GPU driver or Mesa without a display), OSMesa, or EGL with
+    /// OSMesa as the fallback.
+    #[arg(long, value_enum, default_value = "auto")]
+    pub renderer: RendererChoice,
+    /// Render shadows (costly on a CPU rasteriser).
+    #[arg(long)]
+    pub camera_shadows: bool,
     /// Exit cleanly after this many seconds of wall time.
     #[arg(long, value_parser = parse_duration)]
     pub duration: Option<f64>,

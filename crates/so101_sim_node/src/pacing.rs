@@ -63,6 +63,12 @@ impl Pacer {
         }
     }
 
+    /// Sim time `sim_time` is now: pacing starts over from here (after a deliberate pause).
+    pub fn restart(&mut self, sim_time: f64, now: Instant) {
+        self.anchor_wall = now;
+        self.anchor_sim = sim_time;
+    }
+
     /// How long to sleep before the period that ends at `sim_time` may run (its state is published
     /// when the wall clock reaches its end).
     pub fn wait_before(&mut self, sim_time: f64, now: Instant) -> Duration {

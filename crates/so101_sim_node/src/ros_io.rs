@@ -27,7 +27,10 @@ use so101_msgs::{
     std_srvs::{Trigger, TriggerRequest, TriggerResponse},
 };
 
-use crate::world::{ArmState, CubePose};
+use crate::{
+    cameras::rig::RigDiagnostics,
+    world::{ArmState, CubePose},
+};
 
 /// Everything published for one control period.
 pub struct Frame {
@@ -49,6 +52,7 @@ pub struct NodeDiagnostics {
     pub episode: u64,
     pub physics_divergences: u64,
     pub pacing_resyncs: u64,
+    pub cameras: Option<RigDiagnostics>,
 }
 
 struct Publishers {
@@ -217,21 +221,60 @@ fn diagnostics_message(header: Header, diagnostics: &NodeDiagnostics) -> Diagnos
     } else {
         (DiagnosticStatus::OK, "running")
     };
-    DiagnosticArray {
-        header,
-        status: vec![DiagnosticStatus {
-            level,
-            name: "so101_sim_node".to_owned(),
-            message: message.to_owned(),
-            hardware_id: "so101_sim".to_owned(),
-            values: vec![
-                value("accepted_commands", diagnostics.accepted_commands),
-                value("rejected_commands", diagnostics.rejected_commands),
-                value("episode", diagnostics.episode),
-                value("physics_divergences", diagnostics.physics_divergences),
-                value("pacing_resyncs", diagnostics.pacing_resyncs),
-            ],
-        }],
+    let mut status = vec![DiagnosticStatus {
+        level,
+        name: "so101_sim_node".to_owned(),
+        message: message.to_owned(),
+        hardware_id: "so101_sim".to_owned(),
+        values: vec![
+            value("accepted_commands", diagnostics.accepted_commands),
+            value("rejected_commands", diagnostics.rejected_commands),
+            value("episode", diagnostics.episode),
+            value("physics_divergences", diagnostics.physics_divergences),
+            value("pacing_resyncs", diagnostics.pacing_resyncs),
+        ],
+    }];
+    status.extend(diagnostics.cameras.as_ref().map(camera_status));
+    DiagnosticArray { header, status }
+}
+
+/// The cameras' status: frames rendered and skipped per camera, render time, the GL renderer.
+fn camera_status(rig: &RigDiagnostics) -> DiagnosticStatus {
+    let skipped: u64 = rig.cameras.iter().map(|camera| camera.skipped).sum();
+    let (level, message) = if skipped > 0 {
+        (
+            DiagnosticStatus::WARN,
+            "the renderer cannot keep up: frames skipped (lower --camera-rate or --camera-size)",
+        )
+    } else {
+        (DiagnosticStatus::OK, "rendering every frame")
+    };
+    let mut values = vec![
+        KeyValue {
+            key: "renderer".into(),
+            value: rig.renderer.clone(),
+        },
+        KeyValue {
+            key: "mean_render_ms".into(),
+            value: format!("{:.3}", rig.mean_render_ms),
+        },
+    ];
+    for camera in &rig.cameras {
+        values.push(KeyValue {
+            key: format!("{}.rendered", camera.name),
+            value: camera.rendered.to_string(),
+        });
+        values.push(KeyValue {
+            key: format!("{}.skipped", camera.name),
+            value: camera.skipped.to_string(),
+        });
+    }
+    DiagnosticStatus {
+        level,
+        name: "so101_sim_node: cameras".to_owned(),
+        message: message.to_owned(),
+        hardware_id: "so101_sim".to_owned(),
+        values,
     }
 }
 

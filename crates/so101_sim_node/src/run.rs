@@ -10,6 +10,7 @@ use anyhow::{Context, Result};
 use so101_core::ros::{command_inbox::CommandInbox, shutdown::Shutdown, RosNode};
 
 use crate::{
+    cameras::rig::{CameraRig, Capture, RigOptions},
     cli::Args,
     demo::{Script, PICK_AND_PLACE},
     mujoco,
@@ -43,7 +44,7 @@ const LOCKSTEP_POLL: Duration = Duration::from_micros(100);
 /// Loads the scene, starts the node and runs the loop until a signal or `--duration`.
 pub fn run(args: Args) -> Result<()> {
     let simulation = scene::load(&args.scene, args.lite)?;
-    let world =
+    let mut world =
         World::new(simulation, 1.0 / args.rate).context("the scene does not fit the node")?;
     let time_mode = if args.lockstep {
         TimeMode::Lockstep
@@ -65,6 +66,7 @@ pub fn run(args: Args) -> Result<()> {
     let publisher = FramePublisher::start(&mut node)?;
     let inbox = CommandInbox::subscribe(&mut node)?;
     let services = SimServices::serve(&mut node)?;
+    let cameras = start_cameras(&args, time_mode, &mut world, &mut node)?;
     let pacer = Pacer::new(
         match time_mode {
             TimeMode::Scaled { speed } => Some(speed),
@@ -86,10 +88,36 @@ pub fn run(args: Args) -> Result<()> {
         inbox,
         services,
         pacer,
+        cameras,
         _node: node,
     };
     control.run(&shutdown);
     Ok(())
+}
+
+/// The camera rig of `--cameras` (none for "none").
+fn start_cameras(
+    args: &Args,
+    time_mode: TimeMode,
+    world: &mut World,
+    node: &mut RosNode,
+) -> Result<Option<CameraRig>> {
+    let specs = args.cameras.resolve(args.camera_size, args.camera_rate);
+    if specs.is_empty() {
+        return Ok(None);
+    }
+    let time = world.time();
+    let options = RigOptions {
+        renderer: args.renderer,
+        show_collision_geoms: args.lite,
+        shadows: args.camera_shadows,
+        jpeg_quality: args.jpeg.then_some(args.jpeg_quality),
+        // Only real time may skip frames; every other mode renders each at its sim-time instant.
+        wait_for_renderer: time_mode != TimeMode::Scaled { speed: 1.0 },
+    };
+    CameraRig::start(world.simulation_mut(), node, specs, options, time)
+        .map(Some)
+        .context("cannot start the cameras")
 }
 
 struct SimLoop {
@@ -105,19 +133,30 @@ struct SimLoop {
     demo_start: f64,
     diagnostics: NodeDiagnostics,
     next_diagnostics: f64,
+    cameras: Option<CameraRig>,
     // Declared last: dropped after the publishers and readers that belong to it.
     _node: RosNode,
 }
 
 impl SimLoop {
     fn run(&mut self, shutdown: &Shutdown) {
+        // The state at time 0, so subscribers see the arm before the first step. The first frames
+        // are waited for in every mode (the renderer's first draw is slow); then the clocks start.
+        if let Some(rig) = &mut self.cameras {
+            let time = self.world.time();
+            if let Capture::Queued(published) =
+                rig.capture_and_wait(self.world.simulation_mut(), time)
+            {
+                wait_until_published(published);
+            }
+            self.pacer.restart(time, Instant::now());
+        }
         let deadline = self
             .args
             .duration
             .map(|seconds| Instant::now() + Duration::from_secs_f64(seconds.max(0.0)));
         let started = (Instant::now(), self.world.time(), self.world.total_steps());
         let mut last_intake = started.0 - MAX_SPEED_INTAKE_PERIOD;
-        // The state at time 0, so subscribers see the arm before the first step.
         self.publish(None);
         while !shutdown.is_requested() && deadline.is_none_or(|deadline| Instant::now() < deadline)
         {
@@ -139,6 +178,7 @@ impl SimLoop {
                 continue;
             }
             let report = self.advance_period();
+            self.capture_frames(false);
             self.publish(report);
         }
         self.publisher.flush();
@@ -152,6 +192,19 @@ impl SimLoop {
             steps_per_second = physics_steps as f64 / wall_seconds,
             "shutting down"
         );
+        if let Some(rig) = &self.cameras {
+            let report = rig.diagnostics();
+            for camera in &report.cameras {
+                tracing::info!(
+                    camera = %camera.name,
+                    rendered = camera.rendered,
+                    skipped = camera.skipped,
+                    frames_per_second = camera.rendered as f64 / wall_seconds,
+                    mean_render_ms = report.mean_render_ms,
+                    "camera frames"
+                );
+            }
+        }
     }
 
     /// Valid commands become the new targets (clamped); the first one ends the demo.
@@ -170,6 +223,9 @@ impl SimLoop {
         while let Some(call) = self.services.next_reset() {
             let start = self.placer.next_start();
             self.world.reset(Some(start));
+            if let Some(rig) = &mut self.cameras {
+                rig.restart(self.world.time());
+            }
             self.diagnostics.episode += 1;
             self.demo_start = self.world.time();
             tracing::info!(
@@ -184,7 +240,9 @@ impl SimLoop {
                 self.diagnostics.episode, start.x, start.y, start.yaw
             );
             // The caller sees the new episode on the topics by the time it has the answer.
+            let frames = self.capture_frames(true);
             self.publish_and_wait(None);
+            wait_until_published(frames);
             self.services.answer_reset(call, true, message);
         }
     }
@@ -201,7 +259,9 @@ impl SimLoop {
             // A command sent before this /sim/step call must act in this very step.
             self.apply_commands();
             let report = self.advance_period();
+            let frames = self.capture_frames(true);
             self.publish_and_wait(report);
+            wait_until_published(frames);
             let time = self.world.time();
             self.services
                 .answer_step(call, true, format!("t={time:.6}"));
@@ -251,7 +311,19 @@ impl SimLoop {
         self.diagnostics.accepted_commands = self.inbox.tally.accepted;
         self.diagnostics.rejected_commands = self.inbox.tally.rejected;
         self.diagnostics.pacing_resyncs = self.pacer.resyncs;
+        self.diagnostics.cameras = self.cameras.as_ref().map(CameraRig::diagnostics);
         Some(self.diagnostics.clone())
+    }
+
+    /// Hands the frames due now to the renderer. With `notify` (and a renderer that waits rather
+    /// than skips), the answer fires once they are published.
+    fn capture_frames(&mut self, notify: bool) -> Option<std::sync::mpsc::Receiver<()>> {
+        let rig = self.cameras.as_mut()?;
+        let time = self.world.time();
+        match rig.capture(self.world.simulation_mut(), time, notify) {
+            Capture::Queued(published) => published,
+            Capture::Nothing | Capture::Skipped => None,
+        }
     }
 
     fn publish(&mut self, diagnostics: Option<NodeDiagnostics>) {
@@ -282,5 +354,13 @@ impl SimLoop {
             diagnostics,
             published,
         }
+    }
+}
+
+/// Waits for frames handed to the renderer to be on the wire (a lockstep step or a reset is
+/// answered only then).
+fn wait_until_published(frames: Option<std::sync::mpsc::Receiver<()>>) {
+    if let Some(published) = frames {
+        let _ = published.recv();
     }
 }

@@ -139,6 +139,11 @@ impl World {
         Ok(world)
     }
 
+    /// The MuJoCo simulation itself, for the camera rig (rendering reads the state, never steps).
+    pub fn simulation_mut(&mut self) -> &mut Simulation {
+        &mut self.sim
+    }
+
     /// Joint limits as the scene declares them (commands are clamped to these).
     pub fn limits(&self) -> &[JointLimit; JOINT_COUNT] {
         &self.limits

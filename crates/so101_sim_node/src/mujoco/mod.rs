@@ -2,6 +2,7 @@
 //! stepping it, and reading and writing its state. All raw pointers stay inside this module.
 
 pub mod ffi;
+pub mod render;
 
 use std::{
     ffi::{c_char, CStr, CString},
@@ -30,6 +31,7 @@ pub enum ObjectKind {
     Geom,
     Site,
     Actuator,
+    Camera,
 }
 
 impl ObjectKind {
@@ -40,6 +42,7 @@ impl ObjectKind {
             Self::Geom => ffi::mjOBJ_GEOM,
             Self::Site => ffi::mjOBJ_SITE,
             Self::Actuator => ffi::mjOBJ_ACTUATOR,
+            Self::Camera => ffi::mjOBJ_CAMERA,
         }) as i32
     }
 }

@@ -1,0 +1,97 @@
+//! The anchor of the camera benchmark: a bare MuJoCo offscreen render loop on the node's scene, with
+//! nothing else (no physics, no threads, no ROS): per frame one mjv_updateScene, one mjr_render and
+//! one mjr_readPixels, cycling through the cameras. Prints one JSON line.
+//!
+//! Opens no DDS participant.
+
+use std::time::Instant;
+
+use anyhow::{bail, Context, Result};
+use clap::Parser;
+use so101_core::ros::logging;
+use so101_sim_node::{
+    cameras::spec::{self, FrameSize},
+    cli,
+    mujoco::{
+        render::{RenderContext, SceneBuffer, VisualOptions},
+        ObjectKind,
+    },
+    offscreen::{GlContext, RendererChoice},
+    scene,
+};
+
+/// Milliseconds per frame of a bare MuJoCo offscreen render loop (the camera benchmark's anchor).
+#[derive(Debug, Parser)]
+#[command(version, about)]
+struct Args {
+    /// MJCF scene to load.
+    #[arg(long, default_value = cli::default_scene())]
+    scene: std::path::PathBuf,
+    /// Mesh-free visual variant (as the node's --lite).
+    #[arg(long)]
+    lite: bool,
+    /// Cameras to render in turn, comma-separated.
+    #[arg(long, default_value = "top", value_delimiter = ',')]
+    cameras: Vec<String>,
+    /// Frame size.
+    #[arg(long, default_value = "640x480", value_parser = spec::parse_size)]
+    size: FrameSize,
+    /// Frames measured (after the warm-up).
+    #[arg(long, default_value_t = 300)]
+    frames: u32,
+    /// Frames drawn first and not measured (shader compilation, caches).
+    #[arg(long, default_value_t = 10)]
+    warmup: u32,
+    /// Headless OpenGL platform.
+    #[arg(long, value_enum, default_value = "auto")]
+    renderer: RendererChoice,
+    /// Render shadows.
+    #[arg(long)]
+    shadows: bool,
+}
+
+fn main() -> Result<()> {
+    logging::init();
+    let args = Args::parse();
+    let mut sim = scene::load(&args.scene, args.lite)?;
+    let mut cameras = Vec::new();
+    for name in &args.cameras {
+        match sim.id(ObjectKind::Camera, name) {
+            Some(id) => cameras.push(id),
+            None => bail!("the scene has no camera {name:?}"),
+        }
+    }
+    let FrameSize { width, height } = args.size;
+    let (offscreen_width, offscreen_height) = sim.offscreen_size();
+    sim.set_offscreen_size(offscreen_width.max(width), offscreen_height.max(height));
+    let gl = GlContext::create(args.renderer, width, height).context("no OpenGL context")?;
+    let model = sim.model_handle();
+    // Safety: the context is current on this thread and the model lives until the end of main.
+    let mut context = unsafe { RenderContext::new(&model) };
+    let options = VisualOptions::new(args.lite);
+    let mut scene = SceneBuffer::new(&sim, args.shadows);
+    let mut rgb = vec![0u8; 3 * width as usize * height as usize];
+    let mut frame = |index: u32| {
+        let camera = cameras[index as usize % cameras.len()];
+        sim.update_scene(&mut scene, camera, &options);
+        context.render(&mut scene, width, height, &mut rgb);
+    };
+    for index in 0..args.warmup {
+        frame(index);
+    }
+    let started = Instant::now();
+    for index in 0..args.frames {
+        frame(index);
+    }
+    let seconds = started.elapsed().as_secs_f64();
+    println!(
+        "{{\"renderer\": {:?}, \"platform\": {:?}, \"frames\": {}, \"ms_per_frame\": {:.4}, \"frames_per_second\": {:.2}}}",
+        gl.description,
+        gl.platform_name(),
+        args.frames,
+        1e3 * seconds / f64::from(args.frames),
+        f64::from(args.frames) / seconds
+    );
+    drop(context);
+    Ok(())
+}

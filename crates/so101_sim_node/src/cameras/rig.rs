@@ -1,0 +1,450 @@
+//! The camera rig: the physics thread builds the views of the cameras that are due, a render
+//! thread (owning the GL context) draws them, a publisher thread sends them.
+//!
+//! Rendering never holds the physics back in real time: the physics hands a frame over only when
+//! the renderer has a free set of views, and otherwise skips (and counts) it. In lockstep and
+//! `--speed` modes it waits for a free set instead, so every frame is rendered at its sim-time
+//! instant.
+
+use std::{
+    sync::{
+        mpsc::{self, Receiver, SyncSender},
+        Arc, Mutex,
+    },
+    thread::JoinHandle,
+    time::Instant,
+};
+
+use anyhow::{bail, Context, Result};
+use so101_core::ros::RosNode;
+
+use super::{
+    intrinsics::Intrinsics,
+    publish::{publish_batches, CameraTopics, FrameBatch, RenderedFrame},
+    schedule::FrameClock,
+    spec::CameraSpec,
+};
+use crate::{
+    mujoco::{
+        render::{ModelHandle, RenderContext, SceneBuffer, VisualOptions},
+        ObjectKind, Simulation,
+    },
+    offscreen::{GlContext, RendererChoice},
+};
+
+/// How the rig is set up besides its cameras.
+#[derive(Debug, Clone)]
+pub struct RigOptions {
+    pub renderer: RendererChoice,
+    /// Shows the collision geoms (the lite scene has no visual meshes).
+    pub show_collision_geoms: bool,
+    pub shadows: bool,
+    /// Also publish JPEG, at this quality.
+    pub jpeg_quality: Option<u8>,
+    /// Wait for the renderer rather than skip frames (every mode but real time).
+    pub wait_for_renderer: bool,
+}
+
+/// Counters of one camera.
+#[derive(Debug, Clone, Default)]
+pub struct CameraCounters {
+    pub name: String,
+    pub rendered: u64,
+    pub skipped: u64,
+}
+
+/// What /diagnostics reports about the cameras.
+#[derive(Debug, Clone, Default)]
+pub struct RigDiagnostics {
+    pub renderer: String,
+    pub cameras: Vec<CameraCounters>,
+    /// Mean wall time to draw and read one frame.
+    pub mean_render_ms: f64,
+}
+
+/// The per-camera views handed to the render thread and back.
+struct Views(Vec<SceneBuffer>);
+
+struct RenderJob {
+    sim_time: f64,
+    views: Views,
+    due: Vec<usize>,
+    published: Option<SyncSender<()>>,
+}
+
+struct Camera {
+    spec: CameraSpec,
+    model_id: usize,
+    clock: FrameClock,
+    skipped: u64,
+}
+
+#[derive(Default)]
+struct RenderTotals {
+    rendered: Vec<u64>,
+    frames: u64,
+    seconds: f64,
+}
+
+pub struct CameraRig {
+    cameras: Vec<Camera>,
+    options: VisualOptions,
+    wait_for_renderer: bool,
+    free: Vec<Views>,
+    returned: Receiver<Views>,
+    jobs: Option<SyncSender<RenderJob>>,
+    totals: Arc<Mutex<RenderTotals>>,
+    renderer: String,
+    render_thread: Option<JoinHandle<()>>,
+    publish_thread: Option<JoinHandle<()>>,
+}
+
+/// Frames queued between the render and the publisher thread: beyond it rendering waits, and so,
+/// through the views, does the physics (or it skips frames in real time).
+const PUBLISH_QUEUE: usize = 2;
+
+/// Outcome of [`CameraRig::capture`].
+pub enum Capture {
+    /// No camera was due.
+    Nothing,
+    /// Handed to the renderer; the receiver (when asked for) fires once the frames are published.
+    Queued(Option<Receiver<()>>),
+    /// The renderer was busy (real time): the frames were skipped.
+    Skipped,
+}
+
+impl CameraRig {
+    /// Checks the cameras against the model, advertises their topics, and starts the render thread
+    /// (which makes the GL context and uploads the model before this returns).
+    pub fn start(
+        sim: &mut Simulation,
+        node: &mut RosNode,
+        specs: Vec<CameraSpec>,
+        rig: RigOptions,
+        start_time: f64,
+    ) -> Result<Self> {
+        let mut cameras = Vec::with_capacity(specs.len());
+        let mut topics = Vec::with_capacity(specs.len());
+        for spec in specs {
+            let Some(model_id) = sim.id(ObjectKind::Camera, &spec.name) else {
+                bail!(
+                    "the scene has no camera {:?} (--cameras; \"none\" renders nothing)",
+                    spec.name
+                );
+            };
+            let intrinsics =
+                Intrinsics::from_fovy(sim.camera_fovy(model_id), spec.size.width, spec.size.height);
+            topics.push(CameraTopics::advertise(
+                node,
+                &spec.name,
+                intrinsics,
+                rig.jpeg_quality.is_some(),
+            )?);
+            cameras.push(Camera {
+                clock: FrameClock::new(spec.rate, start_time),
+                spec,
+                model_id,
+                skipped: 0,
+            });
+        }
+        // The offscreen buffer must hold the largest frame.
+        let (mut width, mut height) = sim.offscreen_size();
+        for camera in &cameras {
+            width = width.max(camera.spec.size.width);
+            height = height.max(camera.spec.size.height);
+        }
+        sim.set_offscreen_size(width, height);
+
+        let (batch_sender, batches) = mpsc::sync_channel::<FrameBatch>(PUBLISH_QUEUE);
+        let jpeg_quality = rig.jpeg_quality.unwrap_or(0);
+        let publish_thread = std::thread::Builder::new()
+            .name("camera-publisher".into())
+            .spawn(move || publish_batches(&topics, jpeg_quality, &batches))
+            .context("cannot start the camera publisher thread")?;
+
+        // Two sets of views let the physics build the next frame while one renders; real time
+        // keeps one, so a frame is never older than one render when it goes out.
+        let sets = if rig.wait_for_renderer { 2 } else { 1 };
+        let free: Vec<Views> = (0..sets)
+            .map(|_| {
+                Views(
+                    cameras
+                        .iter()
+                        .map(|_| SceneBuffer::new(sim, rig.shadows))
+                        .collect(),
+                )
+            })
+            .collect();
+        let sizes: Vec<(u32, u32)> = cameras
+            .iter()
+            .map(|camera| (camera.spec.size.width, camera.spec.size.height))
+            .collect();
+        let totals = Arc::new(Mutex::new(RenderTotals {
+            rendered: vec![0; cameras.len()],
+            ..RenderTotals::default()
+        }));
+        let (job_sender, jobs) = mpsc::sync_channel::<RenderJob>(sets);
+        let (return_sender, returned) = mpsc::channel::<Views>();
+        let (ready_sender, ready) = mpsc::channel::<Result<String, String>>();
+        let model = sim.model_handle();
+        let thread_totals = Arc::clone(&totals);
+        let renderer_choice = rig.renderer;
+        let render_thread = std::thread::Builder::new()
+            .name("camera-render".into())
+            .spawn(move || {
+                render_thread(RenderThread {
+                    choice: renderer_choice,
+                    model,
+                    size: (width, height),
+                    sizes,
+                    jobs,
+                    returns: return_sender,
+                    batches: batch_sender,
+                    totals: thread_totals,
+                    ready: ready_sender,
+                })
+            })
+            .context("cannot start the camera render thread")?;
+        let renderer = match ready.recv() {
+            Ok(Ok(description)) => description,
+            Ok(Err(error)) => {
+                let _ = render_thread.join();
+                bail!("{error} (--cameras none runs without rendering)");
+            }
+            Err(_) => bail!("the camera render thread died while starting"),
+        };
+        tracing::info!(
+            renderer = %renderer,
+            cameras = %cameras
+                .iter()
+                .map(|camera| format!("{}:{}@{}", camera.spec.name, camera.spec.size, camera.spec.rate))
+                .collect::<Vec<_>>()
+                .join(","),
+            jpeg = rig.jpeg_quality.is_some(),
+            "cameras ready"
+        );
+        Ok(Self {
+            cameras,
+            options: VisualOptions::new(rig.show_collision_geoms),
+            wait_for_renderer: rig.wait_for_renderer,
+            free,
+            returned,
+            jobs: Some(job_sender),
+            totals,
+            renderer,
+            render_thread: Some(render_thread),
+            publish_thread: Some(publish_thread),
+        })
+    }
+
+    /// Every camera takes a frame at the next capture (a new episode).
+    pub fn restart(&mut self, time: f64) {
+        for camera in &mut self.cameras {
+            camera.clock.restart(time);
+        }
+    }
+
+    /// Renders the cameras due at `time` from the simulation's current state. With `notify` (and
+    /// a rig that waits for its renderer), the returned receiver fires once those frames are
+    /// published.
+    pub fn capture(&mut self, sim: &mut Simulation, time: f64, notify: bool) -> Capture {
+        self.capture_with(
+            sim,
+            time,
+            self.wait_for_renderer,
+            notify && self.wait_for_renderer,
+        )
+    }
+
+    /// Like [`CameraRig::capture`], but waits for the renderer in every mode and always notifies:
+    /// for the first frames, which also warm the renderer up (its first draw compiles shaders).
+    pub fn capture_and_wait(&mut self, sim: &mut Simulation, time: f64) -> Capture {
+        self.capture_with(sim, time, true, true)
+    }
+
+    fn capture_with(
+        &mut self,
+        sim: &mut Simulation,
+        time: f64,
+        wait: bool,
+        notify: bool,
+    ) -> Capture {
+        let due: Vec<usize> = (0..self.cameras.len())
+            .filter(|&index| self.cameras[index].clock.take_due(time))
+            .collect();
+        if due.is_empty() {
+            return Capture::Nothing;
+        }
+        self.free.extend(self.returned.try_iter());
+        if self.free.is_empty() && wait {
+            if let Ok(views) = self.returned.recv() {
+                self.free.push(views);
+            }
+        }
+        let Some(mut views) = self.free.pop() else {
+            for &index in &due {
+                self.cameras[index].skipped += 1;
+            }
+            return Capture::Skipped;
+        };
+        sim.refresh_kinematics();
+        for &index in &due {
+            sim.update_scene(
+                &mut views.0[index],
+                self.cameras[index].model_id,
+                &self.options,
+            );
+        }
+        let (published, receiver) = if notify {
+            let (sender, receiver) = mpsc::sync_channel(1);
+            (Some(sender), Some(receiver))
+        } else {
+            (None, None)
+        };
+        let job = RenderJob {
+            sim_time: time,
+            views,
+            due,
+            published,
+        };
+        match &self.jobs {
+            Some(jobs) if jobs.send(job).is_ok() => Capture::Queued(receiver),
+            _ => Capture::Skipped,
+        }
+    }
+
+    pub fn diagnostics(&self) -> RigDiagnostics {
+        let totals = self.totals.lock().map(|totals| {
+            (
+                totals.rendered.clone(),
+                if totals.frames == 0 {
+                    0.0
+                } else {
+                    1e3 * totals.seconds / totals.frames as f64
+                },
+            )
+        });
+        let (rendered, mean_render_ms) = totals.unwrap_or_default();
+        RigDiagnostics {
+            renderer: self.renderer.clone(),
+            cameras: self
+                .cameras
+                .iter()
+                .enumerate()
+                .map(|(index, camera)| CameraCounters {
+                    name: camera.spec.name.clone(),
+                    rendered: rendered.get(index).copied().unwrap_or(0),
+                    skipped: camera.skipped,
+                })
+                .collect(),
+            mean_render_ms,
+        }
+    }
+}
+
+impl Drop for CameraRig {
+    fn drop(&mut self) {
+        // Closing the job queue ends the render thread, which closes the publisher's queue.
+        self.jobs.take();
+        if let Some(thread) = self.render_thread.take() {
+            let _ = thread.join();
+        }
+        if let Some(thread) = self.publish_thread.take() {
+            let _ = thread.join();
+        }
+    }
+}
+
+struct RenderThread {
+    choice: RendererChoice,
+    model: ModelHandle,
+    size: (u32, u32),
+    sizes: Vec<(u32, u32)>,
+    jobs: Receiver<RenderJob>,
+    returns: mpsc::Sender<Views>,
+    batches: SyncSender<FrameBatch>,
+    totals: Arc<Mutex<RenderTotals>>,
+    ready: mpsc::Sender<Result<String, String>>,
+}
+
+fn render_thread(work: RenderThread) {
+    let gl = match GlContext::create(work.choice, work.size.0, work.size.1) {
+        Ok(gl) => gl,
+        Err(error) => {
+            let _ = work.ready.send(Err(error.to_string()));
+            return;
+        }
+    };
+    let started = Instant::now();
+    // Safety: the GL context is current on this thread, and the simulation outlives the rig.
+    let mut context = unsafe { RenderContext::new(&work.model) };
+    let description = format!("{} ({})", gl.description, gl.platform_name());
+    tracing::debug!(
+        seconds = started.elapsed().as_secs_f64(),
+        "model uploaded to GL"
+    );
+    let (width, height) = context.size();
+    if width < work.size.0 || height < work.size.1 {
+        let _ = work.ready.send(Err(format!(
+            "the GL offscreen buffer is {:?}, smaller than the {:?} asked for",
+            context.size(),
+            work.size
+        )));
+        return;
+    }
+    let _ = work.ready.send(Ok(description));
+    let mut bottom_up = Vec::new();
+    for mut job in work.jobs.iter() {
+        let started = Instant::now();
+        let mut frames = Vec::with_capacity(job.due.len());
+        for &camera in &job.due {
+            let (width, height) = work.sizes[camera];
+            bottom_up.resize(3 * width as usize * height as usize, 0);
+            context.render(&mut job.views.0[camera], width, height, &mut bottom_up);
+            frames.push(RenderedFrame {
+                camera,
+                rgb: flip_rows(&bottom_up, 3 * width as usize),
+            });
+        }
+        let elapsed = started.elapsed();
+        if let Ok(mut totals) = work.totals.lock() {
+            for &camera in &job.due {
+                totals.rendered[camera] += 1;
+            }
+            totals.frames += job.due.len() as u64;
+            totals.seconds += elapsed.as_secs_f64();
+        }
+        let _ = work.returns.send(job.views);
+        let batch = FrameBatch {
+            sim_time: job.sim_time,
+            frames,
+            published: job.published,
+        };
+        if work.batches.send(batch).is_err() {
+            break;
+        }
+    }
+    // MuJoCo's GL resources go while their context is still current.
+    drop(context);
+    drop(gl);
+}
+
+/// GL reads rows bottom-up; images go top-down.
+pub fn flip_rows(bottom_up: &[u8], row_bytes: usize) -> Vec<u8> {
+    let mut top_down = Vec::with_capacity(bottom_up.len());
+    for row in bottom_up.chunks_exact(row_bytes).rev() {
+        top_down.extend_from_slice(row);
+    }
+    top_down
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn flip_reverses_the_rows_only() {
+        let bottom_up = [1, 2, 3, 4, 5, 6, 7, 8, 9];
+        assert_eq!(flip_rows(&bottom_up, 3), [7, 8, 9, 4, 5, 6, 1, 2, 3]);
+    }
+}
