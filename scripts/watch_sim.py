@@ -2,7 +2,7 @@
 """Main job: start so101_sim_node with its demo and watch it from an rclpy node.
 
 Prints once a second what a ROS 2 user would see on the topics: sim time, joint positions, the
-cube's position and the task's reward and success. Must run inside a private network namespace
+cube's position, the task's reward and success, and the frames per second of each camera. Must run inside a private network namespace
 (scripts/run_sim_demo.sh takes care of it).
 """
 import argparse
@@ -15,10 +15,11 @@ import time
 import rclpy
 from geometry_msgs.msg import PoseStamped
 from rclpy.node import Node
-from sensor_msgs.msg import JointState
+from sensor_msgs.msg import Image, JointState
 from std_msgs.msg import Bool, Float64
 
 
+CAMERAS = ("top", "front", "wrist")
 SHORT_NAMES = {"shoulder_pan": "pan", "shoulder_lift": "lift", "elbow_flex": "elbow",
                "wrist_flex": "wrist", "wrist_roll": "roll", "gripper": "grip"}
 
@@ -35,6 +36,13 @@ class Watcher(Node):
         self.create_subscription(PoseStamped, "/cube/pose", self._on_cube, 10)
         self.create_subscription(Float64, "/task/reward", self._on_reward, 10)
         self.create_subscription(Bool, "/task/success", self._on_success, 10)
+        self.frames = {name: 0 for name in CAMERAS}
+        self.frames_at_last_line = dict(self.frames)
+        for name in CAMERAS:
+            self.create_subscription(Image, f"/camera/{name}/image_raw", lambda _msg, n=name: self._on_frame(n), 2)
+
+    def _on_frame(self, name):
+        self.frames[name] += 1
 
     def _on_joints(self, msg):
         self.joints = msg
@@ -56,8 +64,10 @@ class Watcher(Node):
         stamp = self.joints.header.stamp.sec + self.joints.header.stamp.nanosec * 1e-9
         joints = " ".join(f"{SHORT_NAMES.get(n, n)}={p:+.2f}" for n, p in zip(self.joints.name, self.joints.position))
         cube = f"cube=({self.cube.x:.3f},{self.cube.y:.3f},{self.cube.z:.3f})" if self.cube else "cube=?"
+        cameras = " ".join(f"{name}={self.frames[name] - self.frames_at_last_line[name]}" for name in CAMERAS)
+        self.frames_at_last_line = dict(self.frames)
         return (f"t={stamp:7.2f}s {joints} {cube} reward={self.reward if self.reward is not None else float('nan'):.2f}"
-                f" in_bin={self.success} drops_in_bin={self.successes}")
+                f" in_bin={self.success} drops_in_bin={self.successes} frames/s: {cameras}")
 
 
 def main():
@@ -89,7 +99,8 @@ def main():
         code = sim.wait(timeout=10)
         watcher.destroy_node()
         rclpy.shutdown()
-    print(f"so101_sim_node exited with {code}; cube dropped in the bin {watcher.successes} time(s)")
+    frames = ", ".join(f"{name} {count}" for name, count in watcher.frames.items())
+    print(f"so101_sim_node exited with {code}; cube dropped in the bin {watcher.successes} time(s); camera frames received: {frames}")
     return 0 if code == 0 else 1
 
 

@@ -1,7 +1,8 @@
-//! What every SO-101 node shares: the robot model and command validation (pure logic), and the ROS 2
-//! plumbing (context from the environment, QoS presets, names under a namespace, sim clock, shutdown,
-//! logging mirrored to /rosout).
+//! What every SO-101 node shares: the robot model, its kinematics and command validation (pure
+//! logic), and the ROS 2 plumbing (context from the environment, QoS presets, names under a
+//! namespace, sim clock, shutdown, logging mirrored to /rosout).
 
 pub mod command;
+pub mod kinematics;
 pub mod robot;
 pub mod ros;
