@@ -28,7 +28,9 @@ struct LinkOffset {
     rotation: [f64; 4],
 }
 
-/// shoulder (pan), upper_arm (lift), lower_arm (elbow), wrist (flex), gripper (roll).
+/// shoulder (pan), upper_arm (lift), lower_arm (elbow), wrist (flex), gripper (roll). The numbers
+/// are the scene's, as written there (MuJoCo normalises the quaternions, and so does `offset`).
+#[allow(clippy::approx_constant)]
 const CHAIN: [LinkOffset; ARM_JOINTS] = [
     LinkOffset {
         translation: [0.0388353, -8.97657e-09, 0.0624],
