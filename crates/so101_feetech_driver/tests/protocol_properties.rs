@@ -74,11 +74,15 @@ proptest! {
         let status = StatusPacket { id, errors: ServoErrors(errors), parameters };
         let packet = encode_status(&status).unwrap();
         prop_assert_eq!(decode_status(&packet).unwrap(), status.clone());
-        // Noise first, then the packet twice: the second copy always comes through intact.
+        // Noise first, then the packet twice, then idle-line bytes: the packet always comes through
+        // intact. (Noise can look like a header announcing a longer packet than the bytes behind
+        // it; the reader then waits for that length, as on the wire, where the bus times out
+        // and drains. The trailing bytes complete such a fake packet so its checksum fails.)
         let mut reader = PacketReader::new();
         reader.push(&noise);
         reader.push(&packet);
         reader.push(&packet);
+        reader.push(&[0u8; 300]);
         let mut received = Vec::new();
         while let Some(result) = reader.next_status() {
             if let Ok(packet) = result {
@@ -108,4 +112,33 @@ proptest! {
             prop_assert_eq!(register.decode(&bytes).unwrap(), value);
         }
     }
+}
+
+/// Found by the property above: noise that reads as a header announcing 13 bytes, before a 6-byte
+/// status packet sent twice.
+#[test]
+fn a_fake_header_longer_than_the_bytes_behind_it_delays_but_never_hides_a_packet() {
+    let status = StatusPacket {
+        id: 0,
+        errors: ServoErrors(0),
+        parameters: vec![],
+    };
+    let packet = encode_status(&status).unwrap();
+    let mut reader = PacketReader::new();
+    reader.push(&[0xFF, 0xFF, 0, 13]);
+    reader.push(&packet);
+    reader.push(&packet);
+    let mut received = Vec::new();
+    while let Some(result) = reader.next_status() {
+        received.extend(result.ok());
+    }
+    assert!(
+        received.is_empty(),
+        "{received:?}: the reader cannot know the header is fake yet"
+    );
+    reader.push(&[0u8; 16]);
+    while let Some(result) = reader.next_status() {
+        received.extend(result.ok());
+    }
+    assert_eq!(received.last(), Some(&status));
 }
