@@ -12,6 +12,7 @@ set -euo pipefail
 . "$(dirname "${BASH_SOURCE[0]}")/common.sh"
 REPO_ROOT="${SO101_ROOT}"
 APT_PACKAGES=(libmujoco-dev libmujoco-samples libclang-dev gcc libc6-dev iproute2 util-linux python3-venv
+              libudev-dev pkg-config
               libegl1 libegl-mesa0 libgl1-mesa-dri libosmesa6)
 MIN_RUST=1.87.0
 

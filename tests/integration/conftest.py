@@ -162,6 +162,27 @@ def recorder_factory(request: pytest.FixtureRequest, tmp_path: Path):
         pytest.fail("\n\n".join(problems), pytrace=False)
 
 
+# =========================================================================== teleop
+@pytest.fixture
+def teleop_factory(request: pytest.FixtureRequest, tmp_path: Path):
+    """start(*args, stdin=None) -> SimNode: teleop_node with the given flags. At teardown it gets
+    SIGINT and must exit 0 (unless the test set `node.exit_expected = True`, or it already ended
+    with 0 by itself)."""
+    nodes: list[SimNode] = []
+
+    def start(*args: str) -> SimNode:
+        node = SimNode(node_binary("teleop_node"), [str(a) for a in args], tmp_path / f"teleop_node.{len(nodes)}.log")
+        nodes.append(node)
+        request.node._so101_recorders = [*getattr(request.node, "_so101_recorders", []), node]
+        return node
+
+    yield start
+
+    problems = stop_nodes(nodes)
+    if problems:
+        pytest.fail("\n\n".join(problems), pytrace=False)
+
+
 # =========================================================================== rclpy
 @pytest.fixture
 def ros():

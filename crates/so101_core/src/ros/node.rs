@@ -144,6 +144,30 @@ impl RosNode {
             })
     }
 
+    /// A client of service `S` on `relative`, with rclpy's service QoS and mapping.
+    pub fn client<S: RosService>(
+        &mut self,
+        relative: &str,
+    ) -> Result<ros2_client::Client<S::Request, S::Response>, NodeError>
+    where
+        S::Request: Clone + 'static,
+        S::Response: 'static,
+    {
+        let name = self.names.name(relative)?;
+        self.node
+            .create_client::<S::Request, S::Response>(
+                ServiceMapping::Enhanced,
+                &name,
+                &S::service_type_name(),
+                qos::service(),
+                qos::service(),
+            )
+            .map_err(|error| NodeError::Create {
+                what: format!("client of {relative}"),
+                reason: format!("{error:?}"),
+            })
+    }
+
     fn topic<T: RosMessage>(
         &self,
         relative: &str,

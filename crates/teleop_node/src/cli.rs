@@ -1,0 +1,142 @@
+//! Command-line options of teleop_node.
+
+use std::path::PathBuf;
+
+use so101_core::ros::NodeArgs;
+
+use crate::{input::keyboard::KEY_HELP, motion::Mode};
+
+/// Where the operator's input comes from.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum SourceKind {
+    /// The keyboard of this terminal.
+    Keyboard,
+    /// The first gamepad connected (Xbox, PlayStation, 8BitDo, Logitech, ... layouts).
+    Gamepad,
+    /// A leader arm on /leader/joint_states (so101_feetech_driver --leader).
+    Leader,
+    /// The scripted cube_to_bin expert (sim): resets, picks, places, judges, episode after episode.
+    Expert,
+    /// Timed inputs from a JSON-lines file (--script): tests and demonstrations.
+    Scripted,
+}
+
+/// Teleoperation of the SO-101: gamepad, keyboard or leader arm in joint or Cartesian space, or a
+/// scripted expert, publishing /joint_commands at a fixed rate and episode controls on
+/// /episode/events.
+#[derive(Debug, clap::Parser)]
+#[command(version, about, long_about = None, after_help = KEY_HELP)]
+pub struct Args {
+    /// Input source.
+    #[arg(long, value_enum, default_value = "keyboard")]
+    pub source: SourceKind,
+    /// Joint space or Cartesian end-effector space (x, y, z, pitch, roll of the gripper).
+    #[arg(long, value_enum, default_value = "joint")]
+    pub mode: Mode,
+    /// /joint_commands per second.
+    #[arg(long, default_value_t = 50.0, value_parser = parse_positive("rate", 1000.0))]
+    pub rate: f64,
+    /// Run on sim time (/clock) instead of wall time: the rate and the expert's timing follow the
+    /// simulation at any --speed.
+    #[arg(long)]
+    pub sim_time: bool,
+    /// Full joint speed in joint mode, rad/s.
+    #[arg(long, default_value_t = 1.0, value_parser = parse_positive("speed", 10.0))]
+    pub joint_speed: f64,
+    /// Full speed of the grasp point in Cartesian mode, m/s.
+    #[arg(long, default_value_t = 0.1, value_parser = parse_positive("speed", 1.0))]
+    pub linear_speed: f64,
+    /// Full pitch and roll speed in Cartesian mode, rad/s.
+    #[arg(long, default_value_t = 1.0, value_parser = parse_positive("speed", 10.0))]
+    pub angular_speed: f64,
+    /// Full gripper speed, rad/s.
+    #[arg(long, default_value_t = 2.0, value_parser = parse_positive("speed", 20.0))]
+    pub gripper_speed: f64,
+    /// Largest change of a joint target in one period for absolute sources (leader, expert), rad.
+    #[arg(long, default_value_t = 0.1, value_parser = parse_positive("step", 3.2))]
+    pub max_step: f64,
+    /// Gamepad stick and trigger dead zone (0..0.9).
+    #[arg(long, default_value_t = 0.12, value_parser = parse_deadzone)]
+    pub deadzone: f64,
+    /// Leader: topic of the leader arm's joint states.
+    #[arg(long, default_value = "leader/joint_states")]
+    pub leader_topic: String,
+    /// Leader: seconds without a message after which the follower holds.
+    #[arg(long, default_value_t = 0.5, value_parser = parse_positive("timeout", 60.0))]
+    pub leader_timeout: f64,
+    /// Scripted: the JSON-lines script.
+    #[arg(long, required_if_eq("source", "scripted"))]
+    pub script: Option<PathBuf>,
+    /// Expert: number of episodes, then exit (0: until stopped).
+    #[arg(long, default_value_t = 0)]
+    pub episodes: u32,
+    /// Expert: seed of its noise (each episode's start event carries a seed derived from it).
+    #[arg(long, default_value_t = 0)]
+    pub seed: u64,
+    /// Expert: standard deviation of the noise on each waypoint's position, m.
+    #[arg(long, default_value_t = 0.0, value_parser = parse_noise)]
+    pub waypoint_noise: f64,
+    /// Expert: standard deviation of the noise on every joint target, rad.
+    #[arg(long, default_value_t = 0.0, value_parser = parse_noise)]
+    pub action_noise: f64,
+    /// Expert: do not call /sim/reset before each episode.
+    #[arg(long)]
+    pub no_reset: bool,
+    /// Expert: the arm's base in the world frame of /cube/pose (the sim scene's by default), m.
+    #[arg(long, default_value = "0,0,0.75", value_parser = parse_point)]
+    pub base_xyz: [f64; 3],
+    /// Expert: where to drop the cube (world frame; the sim scene's bin centre by default), m.
+    #[arg(long, default_value = "0.10,-0.22,0.77", value_parser = parse_point)]
+    pub bin_xyz: [f64; 3],
+    /// Task text of the episodes (the recorder's metadata, LeRobot's task).
+    #[arg(long, default_value = "put the cube in the bin")]
+    pub task: String,
+    /// Write a JSON summary here at exit (the expert's episode results).
+    #[arg(long)]
+    pub report: Option<PathBuf>,
+    /// Exit after this many seconds.
+    #[arg(long, value_parser = parse_positive("duration", 1e9))]
+    pub duration: Option<f64>,
+    #[command(flatten)]
+    pub node: NodeArgs,
+}
+
+fn parse_positive(what: &'static str, max: f64) -> impl Fn(&str) -> Result<f64, String> + Clone {
+    move |text| match text.parse::<f64>() {
+        Ok(value) if value.is_finite() && value > 0.0 && value <= max => Ok(value),
+        _ => Err(format!(
+            "{text:?} is not a {what} above 0 and at most {max}"
+        )),
+    }
+}
+
+fn parse_deadzone(text: &str) -> Result<f64, String> {
+    match text.parse::<f64>() {
+        Ok(value) if (0.0..=0.9).contains(&value) => Ok(value),
+        _ => Err(format!("{text:?} is not a dead zone from 0 to 0.9")),
+    }
+}
+
+fn parse_noise(text: &str) -> Result<f64, String> {
+    match text.parse::<f64>() {
+        Ok(value) if (0.0..=0.5).contains(&value) => Ok(value),
+        _ => Err(format!(
+            "{text:?} is not a standard deviation from 0 to 0.5"
+        )),
+    }
+}
+
+/// `x,y,z` in metres.
+fn parse_point(text: &str) -> Result<[f64; 3], String> {
+    let values: Vec<f64> = text
+        .split(',')
+        .map(|part| part.trim().parse::<f64>())
+        .collect::<Result<_, _>>()
+        .map_err(|_| format!("{text:?} is not x,y,z"))?;
+    match values.as_slice() {
+        [x, y, z] if values.iter().all(|v| v.is_finite() && v.abs() < 100.0) => Ok([*x, *y, *z]),
+        _ => Err(format!(
+            "{text:?} is not x,y,z (three finite numbers in metres)"
+        )),
+    }
+}

@@ -1,0 +1,327 @@
+//! The node: reads the arm's /joint_states and the task topics, asks its source once per control
+//! period, turns the answer into joint targets (crate::motion) and publishes them on
+//! /joint_commands; episode controls go to /episode/events and /sim/reset.
+
+use std::time::{Duration, Instant};
+
+use anyhow::{Context, Result};
+use nalgebra::Vector3;
+use ros2_client::{Client, Publisher, Subscription};
+use so101_core::{
+    command::targets_from_joint_state,
+    robot::{JointPositions, JOINT_LIMITS, JOINT_NAMES},
+    ros::{clock::SimClock, qos, rate_limit::RateLimiter, shutdown::Shutdown, RosNode},
+};
+use so101_msgs::{
+    geometry_msgs::PoseStamped,
+    sensor_msgs::JointState,
+    std_msgs::{Bool, Header, String as RosString},
+    std_srvs::{Trigger, TriggerRequest, TriggerResponse},
+};
+
+use crate::{
+    cli::{Args, SourceKind},
+    controls::{event_text, recording_after, Control},
+    expert::ExpertConfig,
+    input::{
+        expert::Expert, gamepad::Gamepad, keyboard::Keyboard, leader::Leader, scripted::Scripted,
+        Request, Scene, Source, Tick,
+    },
+    motion::{follow, jog_cartesian, jog_joints, Mode, Speeds},
+};
+
+/// How long to wait for /sim/reset to answer before asking again (a request sent before the
+/// service was discovered is lost).
+const RESET_ANSWER_TIMEOUT: Duration = Duration::from_secs(2);
+const RESET_ATTEMPTS: u32 = 3;
+
+/// The node's side of the topic contract.
+struct Topics {
+    commands: Publisher<JointState>,
+    events: Publisher<RosString>,
+    joint_states: Subscription<JointState>,
+    cube_pose: Subscription<PoseStamped>,
+    task_success: Subscription<Bool>,
+    reset: Client<TriggerRequest, TriggerResponse>,
+}
+
+impl Topics {
+    fn connect(node: &mut RosNode) -> Result<Self> {
+        Ok(Self {
+            commands: node.publisher("joint_commands", qos::default_topic())?,
+            events: node.publisher("episode/events", qos::reliable(100))?,
+            joint_states: node.subscription("joint_states", qos::reliable(100))?,
+            cube_pose: node.subscription("cube/pose", qos::reliable(100))?,
+            task_success: node.subscription("task/success", qos::reliable(100))?,
+            reset: node.client::<Trigger>("sim/reset")?,
+        })
+    }
+
+    /// Takes everything that arrived: the arm's latest positions and the scene.
+    fn take(&self, measured: &mut Option<JointPositions>, scene: &mut Scene) {
+        while let Ok(Some((message, _))) = self.joint_states.take() {
+            if let Ok(targets) = targets_from_joint_state(&message.name, &message.position) {
+                if let Some(positions) = measured {
+                    targets.apply_clamped(positions, &JOINT_LIMITS);
+                } else if (0..JOINT_NAMES.len()).all(|joint| targets.get(joint).is_some()) {
+                    let mut positions = [0.0; 6];
+                    targets.apply_clamped(&mut positions, &JOINT_LIMITS);
+                    *measured = Some(positions);
+                }
+            }
+        }
+        while let Ok(Some((message, _))) = self.cube_pose.take() {
+            let pose = message.pose;
+            scene.cube = Some((
+                [pose.position.x, pose.position.y, pose.position.z],
+                [
+                    pose.orientation.w,
+                    pose.orientation.x,
+                    pose.orientation.y,
+                    pose.orientation.z,
+                ],
+            ));
+            scene.cube_messages += 1;
+        }
+        while let Ok(Some((message, _))) = self.task_success.take() {
+            scene.task_success = message.data;
+        }
+    }
+
+    fn publish_targets(&self, targets: &JointPositions) -> bool {
+        self.commands
+            .publish(JointState {
+                header: Header::default(),
+                name: JOINT_NAMES.iter().map(|name| name.to_string()).collect(),
+                position: targets.to_vec(),
+                velocity: Vec::new(),
+                effort: Vec::new(),
+            })
+            .is_ok()
+    }
+
+    fn publish_event(&self, text: String) {
+        tracing::info!(event = %text, "episode event");
+        if let Err(error) = self.events.publish(RosString { data: text }) {
+            tracing::warn!(?error, "cannot publish an episode event");
+        }
+    }
+
+    /// Calls /sim/reset; its answer's message, or why there is none.
+    fn reset_sim(&self, shutdown: &Shutdown) -> Result<String, String> {
+        for _ in 0..RESET_ATTEMPTS {
+            let id = self
+                .reset
+                .send_request(TriggerRequest::default())
+                .map_err(|error| format!("cannot send the request: {error:?}"))?;
+            let deadline = Instant::now() + RESET_ANSWER_TIMEOUT;
+            while Instant::now() < deadline && !shutdown.is_requested() {
+                match self.reset.receive_response() {
+                    Ok(Some((answer_id, response))) if answer_id == id => {
+                        return if response.success {
+                            Ok(response.message)
+                        } else {
+                            Err(response.message)
+                        };
+                    }
+                    Ok(_) => std::thread::sleep(Duration::from_millis(1)),
+                    Err(error) => return Err(format!("bad answer: {error:?}")),
+                }
+            }
+        }
+        Err("no answer (is a simulation running?)".into())
+    }
+}
+
+/// The node's clock: wall time since start, or sim time from /clock.
+enum Clock {
+    Wall(Instant),
+    Sim(SimClock),
+}
+
+impl Clock {
+    fn now(&self) -> Option<f64> {
+        match self {
+            Self::Wall(start) => Some(start.elapsed().as_secs_f64()),
+            Self::Sim(clock) => clock.now().map(|time| time.to_nanos() as f64 * 1e-9),
+        }
+    }
+}
+
+fn open_source(args: &Args, node: &mut RosNode) -> Result<Box<dyn Source>> {
+    Ok(match args.source {
+        SourceKind::Keyboard => Box::new(Keyboard::open()?),
+        SourceKind::Gamepad => Box::new(Gamepad::open(args.deadzone)),
+        SourceKind::Leader => Box::new(Leader::subscribe(
+            node,
+            &args.leader_topic,
+            Duration::from_secs_f64(args.leader_timeout),
+        )?),
+        SourceKind::Scripted => {
+            let path = args.script.as_deref().context("--script is needed")?;
+            Box::new(Scripted::load(path)?)
+        }
+        SourceKind::Expert => {
+            let base = Vector3::from(args.base_xyz);
+            let config = ExpertConfig {
+                bin: Vector3::from(args.bin_xyz) - base,
+                table_z: SIM_TABLE_Z - base.z,
+                gripper_open: 0.9,
+                gripper_closed: -0.17,
+                waypoint_noise: args.waypoint_noise,
+                action_noise: args.action_noise,
+                slowness: 1.0,
+            };
+            Box::new(Expert::new(
+                config,
+                base,
+                args.task.clone(),
+                args.seed,
+                (args.episodes > 0).then_some(args.episodes),
+                !args.no_reset,
+            ))
+        }
+    })
+}
+
+/// Height of the sim scene's table top in its world frame, m.
+const SIM_TABLE_Z: f64 = 0.75;
+
+/// Runs the node until a signal, a quit control, the source's end or --duration.
+pub fn run(args: Args) -> Result<()> {
+    let shutdown = Shutdown::on_signals().context("cannot install the signal handlers")?;
+    let mut node = RosNode::start("teleop_node", &args.node)?;
+    let topics = Topics::connect(&mut node)?;
+    let clock = if args.sim_time {
+        Clock::Sim(SimClock::subscribe(&mut node, shutdown.clone())?)
+    } else {
+        Clock::Wall(Instant::now())
+    };
+    let mut source = open_source(&args, &mut node)?;
+    let speeds = Speeds {
+        joint: args.joint_speed,
+        linear: args.linear_speed,
+        angular: args.angular_speed,
+        gripper: args.gripper_speed,
+    };
+    let period = 1.0 / args.rate;
+    let started = Instant::now();
+    let mut mode = args.mode;
+    let mut recording = false;
+    let mut targets: Option<JointPositions> = None;
+    let mut measured: Option<JointPositions> = None;
+    let mut scene = Scene::default();
+    let mut next_tick: Option<f64> = None;
+    let mut warnings = RateLimiter::new(Duration::from_secs(2));
+    let mut waiting_logged = false;
+    tracing::info!(source = ?args.source, mode = ?mode, rate_hz = args.rate, sim_time = args.sim_time, "teleop ready");
+
+    'control: while !shutdown.is_requested() {
+        if args
+            .duration
+            .is_some_and(|seconds| started.elapsed().as_secs_f64() >= seconds)
+        {
+            break;
+        }
+        let Some(now) = clock.now() else {
+            std::thread::sleep(Duration::from_millis(5));
+            continue;
+        };
+        let due = *next_tick.get_or_insert(now);
+        if now + 1e-9 < due {
+            let wait = match clock {
+                Clock::Wall(_) => Duration::from_secs_f64((due - now).min(0.005)),
+                // Sim time may run at any speed: look again soon.
+                Clock::Sim(_) => Duration::from_micros(500),
+            };
+            std::thread::sleep(wait);
+            continue;
+        }
+        // A stall (or a sim-time jump) is not followed by a burst of periods.
+        next_tick = Some(if now - due > period {
+            now + period
+        } else {
+            due + period
+        });
+
+        topics.take(&mut measured, &mut scene);
+        if targets.is_none() {
+            targets = measured;
+        }
+        let Some(current) = targets else {
+            if !waiting_logged {
+                tracing::info!("waiting for the arm's /joint_states");
+                waiting_logged = true;
+            }
+            continue;
+        };
+        scene.targets = Some(current);
+        let reading = source.read(&Tick {
+            now,
+            cartesian: mode == Mode::Cartesian,
+            scene,
+        });
+        let mut next = current;
+        match reading.request {
+            Request::Jog(jog) if jog.is_still() => {}
+            Request::Jog(jog) => match mode {
+                Mode::Joint => next = jog_joints(&current, &jog, &speeds, period),
+                Mode::Cartesian => {
+                    let step = jog_cartesian(&current, &jog, &speeds, period);
+                    if !step.reached {
+                        if let Some(suppressed) = warnings.check(Instant::now()) {
+                            tracing::warn!(
+                                suppressed,
+                                "Cartesian target out of reach: moving as far as the arm goes"
+                            );
+                        }
+                    }
+                    next = step.targets;
+                }
+            },
+            Request::Targets(wanted) => next = follow(&current, &wanted, args.max_step),
+            Request::Lost => {}
+        }
+        targets = Some(next);
+        if !topics.publish_targets(&next) {
+            if let Some(suppressed) = warnings.check(Instant::now()) {
+                tracing::warn!(suppressed, "publishing /joint_commands failed");
+            }
+        }
+        for control in reading.controls {
+            if let Some(text) = event_text(&control, recording) {
+                topics.publish_event(text);
+            }
+            recording = recording_after(&control, recording);
+            match control {
+                Control::ResetSim => match topics.reset_sim(&shutdown) {
+                    Ok(message) => {
+                        tracing::info!(%message, "sim reset");
+                        // The arm starts the new episode at home: follow it from there.
+                        targets = None;
+                        measured = None;
+                        std::thread::sleep(Duration::from_millis(50));
+                        topics.take(&mut measured, &mut scene);
+                        measured = None;
+                    }
+                    Err(reason) => tracing::warn!(%reason, "/sim/reset failed"),
+                },
+                Control::ToggleMode => {
+                    mode = mode.toggled();
+                    tracing::info!(mode = ?mode, "mode");
+                }
+                Control::Halt => tracing::info!("halt: holding"),
+                Control::Quit => break 'control,
+                _ => {}
+            }
+        }
+    }
+    if let (Some(path), Some(report)) = (&args.report, source.report()) {
+        std::fs::write(path, serde_json::to_string_pretty(&report)?)
+            .with_context(|| format!("cannot write the report {}", path.display()))?;
+    }
+    // Let the last commands and events leave before the node goes.
+    std::thread::sleep(Duration::from_millis(100));
+    tracing::info!("teleop stopped");
+    Ok(())
+}

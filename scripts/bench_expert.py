@@ -1,0 +1,88 @@
+#!/usr/bin/env python3
+"""Success rate of teleop_node's scripted expert on cube_to_bin: N seeded episodes against
+so101_sim_node (sim time, --speed S), judged by the sim's /task/success (issue 4's target: >= 90 %
+over 50 episodes). Also the same episodes with waypoint and action noise, as used to make varied
+demonstrations.
+
+Must run inside one private network namespace (scripts/bench.sh does that). Prints a Markdown
+report on stdout and writes the raw numbers as JSON to --json.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+
+def node_env() -> dict:
+    # The venv's Python carries an LD_LIBRARY_PATH into the ROS wheels; Rust binaries need none.
+    env = {k: v for k, v in os.environ.items() if k != "LD_LIBRARY_PATH"}
+    env.setdefault("RUST_LOG", "info")
+    return env
+
+
+def run_expert(bin_dir: Path, episodes: int, speed: float, sim_seed: int, expert_seed: int, noise: tuple[float, float],
+               lite: bool) -> dict:
+    with tempfile.TemporaryDirectory() as work:
+        report = Path(work) / "report.json"
+        sim_args = [str(bin_dir / "so101_sim_node"), "--cameras", "none", "--speed", str(speed), "--seed", str(sim_seed)]
+        if lite:
+            sim_args.append("--lite")
+        sim = subprocess.Popen(sim_args, env=node_env(), stderr=subprocess.DEVNULL)
+        started = time.monotonic()
+        try:
+            expert = subprocess.run(
+                [str(bin_dir / "teleop_node"), "--source", "expert", "--sim-time", "--episodes", str(episodes),
+                 "--seed", str(expert_seed), "--waypoint-noise", str(noise[0]), "--action-noise", str(noise[1]),
+                 "--report", str(report)],
+                env=node_env(), stderr=subprocess.PIPE, text=True, timeout=episodes * 12 / speed + 120,
+            )
+        finally:
+            sim.terminate()
+            sim.wait(timeout=20)
+        if expert.returncode != 0:
+            raise RuntimeError(f"teleop_node exited with {expert.returncode}:\n{expert.stderr[-3000:]}")
+        result = json.loads(report.read_text())
+        result["wall_seconds"] = time.monotonic() - started
+        return result
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--bin-dir", type=Path, required=True)
+    parser.add_argument("--episodes", type=int, default=50)
+    parser.add_argument("--speed", type=float, default=4.0, help="sim speed factor (the expert runs on sim time)")
+    parser.add_argument("--seed", type=int, default=1, help="sim seed (cube placements)")
+    parser.add_argument("--json", type=Path, default=None)
+    args = parser.parse_args()
+
+    runs = {
+        "no noise": run_expert(args.bin_dir, args.episodes, args.speed, args.seed, 1, (0.0, 0.0), lite=False),
+        "waypoint noise 5 mm, action noise 0.01 rad": run_expert(args.bin_dir, args.episodes, args.speed, args.seed, 1,
+                                                                  (0.005, 0.01), lite=False),
+    }
+    lines = [
+        f"| expert | episodes | successes | success rate | wall time |",
+        "|---|---|---|---|---|",
+    ]
+    for label, result in runs.items():
+        lines.append(f"| {label} | {result['episodes']} | {result['successes']} | **{100 * result['success_rate']:.0f} %** "
+                     f"| {result['wall_seconds']:.0f} s |")
+        failures = [r for r in result["results"] if not r["success"]]
+        for failure in failures:
+            lines.append(f"|  failed: episode {failure['episode']} | cube x={failure['cube'][0]:.3f} y={failure['cube'][1]:.3f} "
+                         f"yaw={failure['cube'][3]:.2f} | {failure['note']} | | |")
+        print(f"{label}: {result['successes']}/{result['episodes']}", file=sys.stderr)
+    print("\n".join(lines))
+    if args.json:
+        args.json.write_text(json.dumps(runs, indent=2))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
