@@ -101,7 +101,7 @@ def test_scripted_joint_jog_moves_the_sim_arm_at_the_set_speed_and_rate(sim_fact
     commands = commands_inbox(ros)
     script = write_script(tmp_path / "jog.jsonl", [
         {"at": 0.0, "jog": [0, 0, 0, 0, 0, 0]},
-        {"at": 1.0, "jog": [1, 0, 0, 0, 0, -1]},
+        {"at": 1.0, "jog": [1, 0, 0, 0, 0, 1]},
         {"at": 2.0, "jog": [0, 0, 0, 0, 0, 0]},
     ])
     teleop_factory("--source", "scripted", "--script", script, "--joint-speed", "0.5", "--gripper-speed", "0.2")
@@ -113,7 +113,7 @@ def test_scripted_joint_jog_moves_the_sim_arm_at_the_set_speed_and_rate(sim_fact
     assert 45 <= len(window) <= 55, f"{len(window)} /joint_commands in the last second (50 Hz expected)"
     end = positions_by_name(items[-1][1])
     assert end["shoulder_pan"] - start["shoulder_pan"] == pytest.approx(0.5, abs=0.03), (start, end)
-    assert end["gripper"] - start["gripper"] == pytest.approx(-0.2, abs=0.02), (start, end)
+    assert end["gripper"] - start["gripper"] == pytest.approx(0.2, abs=0.02), (start, end)
     for name in ("shoulder_lift", "elbow_flex", "wrist_flex", "wrist_roll"):
         assert end[name] == pytest.approx(start[name], abs=1e-9), name
     # The sim arm went there.
@@ -124,7 +124,7 @@ def test_scripted_joint_jog_moves_the_sim_arm_at_the_set_speed_and_rate(sim_fact
 def test_cartesian_jog_moves_the_grasp_point_along_each_axis(sim_factory, teleop_factory, ros, tmp_path):
     running = start_and_wait(sim_factory, ros)
     commands = commands_inbox(ros)
-    reach = [0.1, 0.5, 0.5, 0.9, 0.2, 0.5]
+    reach = [0.1, -0.3, 0.3, 1.0, 0.2, 0.5]  # grasp point 11 cm above the table
     # Absolute to a reaching pose first (Cartesian mode ignores the mode for targets), then 1 s of
     # +x, then 1 s of -z and 1 s of +y, at 4 cm/s.
     script = write_script(tmp_path / "cartesian.jsonl", [

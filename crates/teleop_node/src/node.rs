@@ -34,6 +34,10 @@ use crate::{
 /// service was discovered is lost).
 const RESET_ANSWER_TIMEOUT: Duration = Duration::from_secs(2);
 const RESET_ATTEMPTS: u32 = 3;
+/// Nothing is published before this much time after start: DDS discovery of the peers already
+/// running (a recorder waiting for /episode/events) takes a moment, and what is sent before
+/// they are matched is lost.
+const DISCOVERY_GRACE: Duration = Duration::from_millis(1500);
 
 /// The node's side of the topic contract.
 struct Topics {
@@ -245,6 +249,9 @@ pub fn run(args: Args) -> Result<()> {
         });
 
         topics.take(&mut measured, &mut scene);
+        if started.elapsed() < DISCOVERY_GRACE {
+            continue;
+        }
         if targets.is_none() {
             targets = measured;
         }
