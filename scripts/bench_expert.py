@@ -61,11 +61,13 @@ def main() -> int:
     parser.add_argument("--json", type=Path, default=None)
     args = parser.parse_args()
 
-    runs = {
-        "no noise": run_expert(args.bin_dir, args.episodes, args.speed, args.seed, 1, (0.0, 0.0), lite=False),
-        "waypoint noise 5 mm, action noise 0.01 rad": run_expert(args.bin_dir, args.episodes, args.speed, args.seed, 1,
-                                                                  (0.005, 0.01), lite=False),
+    noises = {
+        "no noise": (0.0, 0.0),
+        "waypoint noise 3 mm, action noise 0.005 rad": (0.003, 0.005),
+        "waypoint noise 5 mm, action noise 0.01 rad": (0.005, 0.01),
     }
+    runs = {label: run_expert(args.bin_dir, args.episodes, args.speed, args.seed, 1, noise, lite=False)
+            for label, noise in noises.items()}
     lines = [
         f"| expert | episodes | successes | success rate | wall time |",
         "|---|---|---|---|---|",

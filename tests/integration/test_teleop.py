@@ -305,11 +305,16 @@ def test_episode_controls_reach_the_recorder_topic_and_reset_the_sim(sim_factory
 
 
 # =========================================================================== the expert
-def test_the_expert_puts_the_cube_in_the_bin_in_seeded_episodes(sim_factory, teleop_factory, ros, tmp_path):
+def test_the_expert_puts_the_cube_in_the_bin_in_seeded_episodes_and_the_recorder_keeps_them(
+        sim_factory, teleop_factory, recorder_factory, ros, tmp_path):
     from std_msgs.msg import String
 
+    from recorder_harness import episode_dirs, load_metadata, mcap_files, read_bag
+
     sim = sim_factory("--speed", "3", "--seed", "11")
+    recorder = recorder_factory()
     events = ros.subscribe("/episode/events", String, reliable_qos(1000))
+    wait_until(lambda: ros.node.count_subscribers("/episode/events") >= 2, 20.0, "the recorder's /episode/events subscription", sim)
     report = tmp_path / "expert.json"
     episodes = 4
     teleop = teleop_factory("--source", "expert", "--sim-time", "--episodes", str(episodes), "--seed", "5",
@@ -327,6 +332,19 @@ def test_the_expert_puts_the_cube_in_the_bin_in_seeded_episodes(sim_factory, tel
     # Every episode started from another cube pose (the sim's seeded resets).
     cubes = [tuple(r["cube"][:2]) for r in result["results"]]
     assert len({(round(x, 3), round(y, 3)) for x, y in cubes}) == episodes, cubes
+    # One bag per episode, with the expert's verdict, task and seed, and its motion in it.
+    wait_until(lambda: len(episode_dirs(recorder.output)) == episodes
+               and all((d / "metadata.yaml").is_file() for d in episode_dirs(recorder.output)), 15.0, "the episode bags", sim)
+    for directory, outcome, start in zip(episode_dirs(recorder.output), result["results"], starts):
+        custom = load_metadata(directory)["custom_data"]
+        announced = json.loads(start[6:])
+        assert custom["success"] == str(outcome["success"]).lower(), (directory.name, custom, outcome)
+        assert (custom["task"], custom["seed"]) == (announced["task"], str(announced["seed"])), custom
+        bag = read_bag(mcap_files(directory)[0])
+        commands = bag.on("/joint_commands")
+        assert len(commands) > 300, f"{directory.name}: {len(commands)} joint_commands (about 7.6 s at 50 Hz expected)"
+        grippers = [m.ros.position[5] for m in commands]
+        assert min(grippers) < 0 < 0.8 < max(grippers), f"{directory.name}: the gripper never opened and closed"
 
 
 # =========================================================================== bad input

@@ -62,7 +62,7 @@ const APPROACH_ABOVE_CUBE: f64 = 0.06;
 const CARRY_ABOVE_TABLE: f64 = 0.13;
 const RELEASE_ABOVE_TABLE: f64 = 0.095;
 /// Sideways room between the fixed jaw's pad and the cube on the way down, m.
-const JAW_CLEARANCE: f64 = 0.004;
+const JAW_CLEARANCE: f64 = 0.007;
 /// Grasp pitches tried in order: straight down first, then tilted (far or near the base).
 const GRASP_PITCHES: [f64; 5] = [FRAC_PI_2, 1.35, 1.15, 0.95, 0.75];
 
