@@ -1,15 +1,15 @@
 #!/usr/bin/env bash
 # Create (or update) the project's Python environment .venv in the repository root:
-# rclpy (ROS 2 Jazzy PyPI wheels), the standard message packages, Fast DDS and pytest, all pinned
-# in scripts/requirements-ros.txt.
+# rclpy (ROS 2 Jazzy PyPI wheels), the standard message packages, Fast DDS, LeRobot and the test tools,
+# all pinned in scripts/requirements-ros.txt.
 #
 # Idempotent: a stamp in .venv holds the hash of the requirements file and the interpreter version,
 # so a second run with unchanged requirements returns at once. A venv made by another Python
 # minor version is rebuilt from scratch.
 #
 # Environment:
-#   PYTHON   interpreter to build the venv with (default: python3; must be CPython 3.11 or 3.12,
-#            the only versions the ros-jazzy-* wheels exist for)
+#   PYTHON   interpreter to build the venv with (default: the first CPython 3.12 found; lerobot
+#            0.6 needs 3.12, and the ros-jazzy-* wheels exist for it)
 #   VENV     where to put the venv (default: <repo>/.venv)
 #
 # Afterwards: `. scripts/ros_env.sh` (optional, see there), and run anything that opens a DDS
@@ -27,25 +27,25 @@ die() { printf 'setup_python: ERROR: %s\n' "$*" >&2; exit 1; }
 
 [ -f "${REQUIREMENTS}" ] || die "missing ${REQUIREMENTS}"
 
-# Pick the interpreter: $PYTHON if given, else python3, falling back to python3.12/python3.11
-# when python3 is another version.
+# Pick the interpreter: $PYTHON if given, else the first CPython 3.12 found (on PATH, then pyenv's
+# versions; Debian 12's own python3 is 3.11, which lerobot 0.6 does not support).
 py_version_of() { "$1" -c 'import sys; print("%d.%d" % sys.version_info[:2])' 2>/dev/null; }
-supported() { case "$1" in 3.11|3.12) return 0 ;; *) return 1 ;; esac; }
+supported() { [ "$1" = "3.12" ]; }
 
 if [ -n "${PYTHON:-}" ]; then
     command -v "${PYTHON}" >/dev/null 2>&1 || die "PYTHON=${PYTHON} not found"
     PY_VERSION="$(py_version_of "${PYTHON}")" || die "PYTHON=${PYTHON} does not run (a pyenv shim of a version that is not active?)"
     supported "${PY_VERSION}" ||
-        die "PYTHON=${PYTHON} is Python ${PY_VERSION}; the ros-jazzy-* wheels need CPython 3.11 or 3.12"
+        die "PYTHON=${PYTHON} is Python ${PY_VERSION}; the venv needs CPython 3.12 (lerobot 0.6 and the ros-jazzy-* wheels)"
 else
     PYTHON=""
-    for candidate in python3 python3.12 python3.11; do
+    for candidate in python3.12 python3 /usr/local/bin/python3.12 /usr/bin/python3.12 "${HOME}"/.pyenv/versions/3.12*/bin/python3.12; do
         command -v "${candidate}" >/dev/null 2>&1 || continue
         version="$(py_version_of "${candidate}")" || continue
         if supported "${version}"; then PYTHON="${candidate}"; PY_VERSION="${version}"; break; fi
     done
     [ -n "${PYTHON}" ] ||
-        die "no CPython 3.11 or 3.12 found (tried python3, python3.12, python3.11); set PYTHON=/path/to/python3.11"
+        die "no CPython 3.12 found (tried python3.12, python3, ~/.pyenv/versions/3.12*); install one (e.g. pyenv install 3.12) or set PYTHON=/path/to/python3.12"
 fi
 
 # The .pth hook written below is part of what a venv must have: bump its version when it changes.
@@ -108,6 +108,7 @@ from rosgraph_msgs.msg import Clock  # noqa: F401
 from diagnostic_msgs.msg import DiagnosticArray  # noqa: F401
 from geometry_msgs.msg import PoseStamped  # noqa: F401
 import pytest  # noqa: F401
+from lerobot.datasets.lerobot_dataset import LeRobotDataset  # noqa: F401
 rmw = get_rmw_implementation_identifier()
 assert rmw == "rmw_fastrtps_cpp", rmw
 import os

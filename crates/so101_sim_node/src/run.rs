@@ -123,6 +123,8 @@ fn start_cameras(
 struct SimLoop {
     args: Args,
     time_mode: TimeMode,
+    // Before `world`: the rig (its render thread) goes before the model it was made from.
+    cameras: Option<CameraRig>,
     world: World,
     publisher: FramePublisher,
     inbox: CommandInbox,
@@ -133,7 +135,6 @@ struct SimLoop {
     demo_start: f64,
     diagnostics: NodeDiagnostics,
     next_diagnostics: f64,
-    cameras: Option<CameraRig>,
     // Declared last: dropped after the publishers and readers that belong to it.
     _node: RosNode,
 }
@@ -239,10 +240,19 @@ impl SimLoop {
                 "episode {} started: cube at x={:.4} y={:.4} yaw={:.4}",
                 self.diagnostics.episode, start.x, start.y, start.yaw
             );
-            // The caller sees the new episode on the topics by the time it has the answer.
-            let frames = self.capture_frames(true);
+            // The caller sees the new episode on the topics, its camera frames too, by the time it
+            // has the answer (in real time as well: a reset is a break in the episode anyway).
+            let time = self.world.time();
+            let frames = match &mut self.cameras {
+                Some(rig) => match rig.capture_and_wait(self.world.simulation_mut(), time) {
+                    Capture::Queued(published) => published,
+                    Capture::Nothing | Capture::Skipped => None,
+                },
+                None => None,
+            };
             self.publish_and_wait(None);
             wait_until_published(frames);
+            self.pacer.restart(time, Instant::now());
             self.services.answer_reset(call, true, message);
         }
     }

@@ -203,6 +203,9 @@ impl World {
         self.episode_periods += 1;
         self.episode_steps += steps;
         self.total_steps += steps;
+        // Poses (/cube/pose, the task's sites, camera frames) of the state published, not of the
+        // one before the last step's integration.
+        self.sim.refresh_kinematics();
         let expected_time = self.episode_steps as f64 * self.timestep;
         if (self.sim.time() - expected_time).abs() <= 0.5 * self.timestep {
             return true;

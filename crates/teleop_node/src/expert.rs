@@ -117,7 +117,12 @@ impl Plan {
         // jaw), which then pushes the cube onto the pad as it closes.
         let solution = kinematics::solve(&grasp, &[0.0; ARM_JOINTS], &limits, &options);
         let jaw_axis = kinematics::grasp_frame(&solution.joints).rotation * Vector3::x();
-        grasp.position -= Vector3::new(jaw_axis.x, jaw_axis.y, 0.0) * JAW_CLEARANCE;
+        let shifted = grasp.position - Vector3::new(jaw_axis.x, jaw_axis.y, 0.0) * JAW_CLEARANCE;
+        // The arm's heading changes a little with the shift: align the jaws for the new one.
+        grasp = reachable_pose(shifted, yaw).unwrap_or(TaskPose {
+            position: shifted,
+            ..grasp
+        });
         let above = |position: Vector3<f64>, height: f64| {
             Vector3::new(position.x, position.y, config.table_z + height)
         };

@@ -113,15 +113,19 @@ impl Topics {
 
     /// Calls /sim/reset; its answer's message, or why there is none.
     fn reset_sim(&self, shutdown: &Shutdown) -> Result<String, String> {
+        let mut sent = Vec::new();
         for _ in 0..RESET_ATTEMPTS {
-            let id = self
-                .reset
-                .send_request(TriggerRequest::default())
-                .map_err(|error| format!("cannot send the request: {error:?}"))?;
+            sent.push(
+                self.reset
+                    .send_request(TriggerRequest::default())
+                    .map_err(|error| format!("cannot send the request: {error:?}"))?,
+            );
             let deadline = Instant::now() + RESET_ANSWER_TIMEOUT;
             while Instant::now() < deadline && !shutdown.is_requested() {
                 match self.reset.receive_response() {
-                    Ok(Some((answer_id, response))) if answer_id == id => {
+                    // A late answer to an earlier request is as good (a slow sim must not be
+                    // reset twice).
+                    Ok(Some((answer_id, response))) if sent.contains(&answer_id) => {
                         return if response.success {
                             Ok(response.message)
                         } else {
@@ -188,6 +192,50 @@ fn open_source(args: &Args, node: &mut RosNode) -> Result<Box<dyn Source>> {
     })
 }
 
+/// The targets after one period of `request`; the current ones where the request would give a
+/// non-finite value (a broken device), which is never published.
+fn next_targets(
+    current: &JointPositions,
+    request: &Request,
+    mode: Mode,
+    speeds: &Speeds,
+    period: f64,
+    max_step: f64,
+    warnings: &mut RateLimiter,
+) -> JointPositions {
+    let next = match request {
+        Request::Jog(jog) if jog.is_still() => *current,
+        Request::Jog(jog) => match mode {
+            Mode::Joint => jog_joints(current, jog, speeds, period),
+            Mode::Cartesian => {
+                let step = jog_cartesian(current, jog, speeds, period);
+                if !step.reached {
+                    if let Some(suppressed) = warnings.check(Instant::now()) {
+                        tracing::warn!(
+                            suppressed,
+                            "Cartesian target out of reach: moving as far as the arm goes"
+                        );
+                    }
+                }
+                step.targets
+            }
+        },
+        Request::Targets(wanted) => follow(current, wanted, max_step),
+        Request::Lost => *current,
+    };
+    if next.iter().all(|value| value.is_finite()) {
+        next
+    } else {
+        if let Some(suppressed) = warnings.check(Instant::now()) {
+            tracing::warn!(
+                suppressed,
+                "ignoring a request that gives non-finite targets"
+            );
+        }
+        *current
+    }
+}
+
 /// Height of the sim scene's table top in its world frame, m.
 const SIM_TABLE_Z: f64 = 0.75;
 
@@ -241,8 +289,9 @@ pub fn run(args: Args) -> Result<()> {
             std::thread::sleep(wait);
             continue;
         }
-        // A stall (or a sim-time jump) is not followed by a burst of periods.
-        next_tick = Some(if now - due > period {
+        // A stall or a sim-time jump (forwards, or backwards when the sim restarted) is not
+        // followed by a burst of periods nor by a long silence.
+        next_tick = Some(if (now - due).abs() > period {
             now + period
         } else {
             due + period
@@ -255,44 +304,39 @@ pub fn run(args: Args) -> Result<()> {
         if targets.is_none() {
             targets = measured;
         }
-        let Some(current) = targets else {
-            if !waiting_logged {
-                tracing::info!("waiting for the arm's /joint_states");
-                waiting_logged = true;
-            }
-            continue;
-        };
-        scene.targets = Some(current);
+        scene.targets = targets;
+        // The source is read even before the arm's pose is known, so its controls (quit) work.
         let reading = source.read(&Tick {
             now,
             cartesian: mode == Mode::Cartesian,
             scene,
         });
-        let mut next = current;
-        match reading.request {
-            Request::Jog(jog) if jog.is_still() => {}
-            Request::Jog(jog) => match mode {
-                Mode::Joint => next = jog_joints(&current, &jog, &speeds, period),
-                Mode::Cartesian => {
-                    let step = jog_cartesian(&current, &jog, &speeds, period);
-                    if !step.reached {
-                        if let Some(suppressed) = warnings.check(Instant::now()) {
-                            tracing::warn!(
-                                suppressed,
-                                "Cartesian target out of reach: moving as far as the arm goes"
-                            );
-                        }
+        let resetting = reading.controls.contains(&Control::ResetSim);
+        match targets {
+            // A command sent just before a reset could land after it and pull the arm back.
+            Some(current) if !resetting => {
+                let next = next_targets(
+                    &current,
+                    &reading.request,
+                    mode,
+                    &speeds,
+                    period,
+                    args.max_step,
+                    &mut warnings,
+                );
+                targets = Some(next);
+                if !topics.publish_targets(&next) {
+                    if let Some(suppressed) = warnings.check(Instant::now()) {
+                        tracing::warn!(suppressed, "publishing /joint_commands failed");
                     }
-                    next = step.targets;
                 }
-            },
-            Request::Targets(wanted) => next = follow(&current, &wanted, args.max_step),
-            Request::Lost => {}
-        }
-        targets = Some(next);
-        if !topics.publish_targets(&next) {
-            if let Some(suppressed) = warnings.check(Instant::now()) {
-                tracing::warn!(suppressed, "publishing /joint_commands failed");
+            }
+            Some(_) => {}
+            None => {
+                if !waiting_logged {
+                    tracing::info!("waiting for the arm's /joint_states");
+                    waiting_logged = true;
+                }
             }
         }
         for control in reading.controls {
@@ -306,12 +350,14 @@ pub fn run(args: Args) -> Result<()> {
                         tracing::info!(%message, "sim reset");
                         // The arm starts the new episode at home: follow it from there.
                         targets = None;
-                        measured = None;
                         std::thread::sleep(Duration::from_millis(50));
                         topics.take(&mut measured, &mut scene);
                         measured = None;
                     }
-                    Err(reason) => tracing::warn!(%reason, "/sim/reset failed"),
+                    Err(reason) => {
+                        scene.reset_failures += 1;
+                        tracing::warn!(%reason, "/sim/reset failed");
+                    }
                 },
                 Control::ToggleMode => {
                     mode = mode.toggled();

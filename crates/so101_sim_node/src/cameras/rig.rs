@@ -244,7 +244,8 @@ impl CameraRig {
         }
     }
 
-    /// Renders the cameras due at `time` from the simulation's current state. With `notify` (and
+    /// Renders the cameras due at `time` from the simulation's current state (its kinematics
+    /// up to date, as World::advance leaves them). With `notify` (and
     /// a rig that waits for its renderer), the returned receiver fires once those frames are
     /// published.
     pub fn capture(&mut self, sim: &mut Simulation, time: f64, notify: bool) -> Capture {
@@ -287,7 +288,6 @@ impl CameraRig {
             }
             return Capture::Skipped;
         };
-        sim.refresh_kinematics();
         for &index in &due {
             sim.update_scene(
                 &mut views.0[index],
@@ -309,7 +309,12 @@ impl CameraRig {
         };
         match &self.jobs {
             Some(jobs) if jobs.send(job).is_ok() => Capture::Queued(receiver),
-            _ => Capture::Skipped,
+            _ => {
+                if self.jobs.take().is_some() {
+                    tracing::error!("the camera render thread ended: no more camera frames");
+                }
+                Capture::Skipped
+            }
         }
     }
 
@@ -376,7 +381,8 @@ fn render_thread(work: RenderThread) {
         }
     };
     let started = Instant::now();
-    // Safety: the GL context is current on this thread, and the simulation outlives the rig.
+    // Safety: the GL context is current on this thread, and the model is alive: CameraRig::start
+    // waits for this thread to report ready before it returns, and the model is read only here.
     let mut context = unsafe { RenderContext::new(&work.model) };
     let description = format!("{} ({})", gl.description, gl.platform_name());
     tracing::debug!(

@@ -17,6 +17,8 @@ use crate::{
 /// /cube/pose messages to wait for after a reset before planning (0.3 s at the sim's 100 Hz): the
 /// cube has settled on the table.
 const SETTLE_MESSAGES: u64 = 30;
+/// Seconds to wait for the settled cube and the arm's pose before the episode counts as failed.
+const SETTLE_TIMEOUT: f64 = 10.0;
 /// Seconds after the plan's end for /task/success to turn true.
 const JUDGE_SECONDS: f64 = 1.5;
 
@@ -32,8 +34,11 @@ pub struct EpisodeResult {
 
 enum State {
     Reset,
+    /// Waiting for the cube to settle (and the arm's pose) after a reset.
     Settle {
         after: u64,
+        until: f64,
+        reset_failures: u64,
     },
     Run {
         plan: Plan,
@@ -111,19 +116,30 @@ impl Expert {
                     cube,
                 };
             }
-            Err(error) => self.finish(false, cube, error.to_string(), controls),
+            Err(error) => self.finish(false, false, cube, error.to_string(), controls),
         }
     }
 
-    fn finish(&mut self, success: bool, cube: [f64; 4], note: String, controls: &mut Vec<Control>) {
+    /// Ends the episode; `recorded` says whether its start was announced (then its verdict and
+    /// stop are too).
+    fn finish(
+        &mut self,
+        recorded: bool,
+        success: bool,
+        cube: [f64; 4],
+        note: String,
+        controls: &mut Vec<Control>,
+    ) {
         let episode = self.results.len() as u32 + 1;
         tracing::info!(episode, success, %note, cube_x = cube[0], cube_y = cube[1], cube_yaw = cube[3], "expert episode done");
-        controls.push(if success {
-            Control::MarkSuccess
-        } else {
-            Control::MarkFailure
-        });
-        controls.push(Control::Stop);
+        if recorded {
+            controls.push(if success {
+                Control::MarkSuccess
+            } else {
+                Control::MarkFailure
+            });
+            controls.push(Control::Stop);
+        }
         self.results.push(EpisodeResult {
             episode,
             success,
@@ -161,15 +177,35 @@ impl Source for Expert {
                 }
                 self.state = State::Settle {
                     after: tick.scene.cube_messages + SETTLE_MESSAGES,
+                    until: tick.now + SETTLE_TIMEOUT,
+                    reset_failures: tick.scene.reset_failures,
                 };
                 hold()
             }
-            State::Settle { after } => {
+            State::Settle {
+                after,
+                until,
+                reset_failures,
+            } => {
                 let settled = tick.scene.cube_messages >= *after;
-                if let (true, Some((position, orientation)), Some(targets)) =
+                let unknown = [f64::NAN; 4];
+                if tick.scene.reset_failures > *reset_failures {
+                    // No new episode to play: not recorded, only counted.
+                    self.finish(
+                        false,
+                        false,
+                        unknown,
+                        "/sim/reset failed".into(),
+                        &mut controls,
+                    );
+                } else if let (true, Some((position, orientation)), Some(targets)) =
                     (settled, tick.scene.cube, tick.scene.targets)
                 {
                     self.start_episode(position, orientation, &targets, tick.now, &mut controls);
+                } else if tick.now > *until {
+                    tracing::warn!("no /cube/pose or /joint_states from the sim: is it running?");
+                    let note = "no /cube/pose or /joint_states to plan from".into();
+                    self.finish(false, false, unknown, note, &mut controls);
                 }
                 hold()
             }
@@ -188,7 +224,7 @@ impl Source for Expert {
             State::Judge { until, cube } => {
                 let (until, cube) = (*until, *cube);
                 if tick.scene.task_success {
-                    self.finish(true, cube, "cube in the bin".into(), &mut controls);
+                    self.finish(true, true, cube, "cube in the bin".into(), &mut controls);
                 } else if tick.now > until {
                     let note = match tick.scene.cube {
                         Some(([x, y, z], _)) => {
@@ -196,7 +232,7 @@ impl Source for Expert {
                         }
                         None => "the cube is not in the bin".into(),
                     };
-                    self.finish(false, cube, note, &mut controls);
+                    self.finish(true, false, cube, note, &mut controls);
                 }
                 hold()
             }

@@ -25,7 +25,8 @@ pub struct PadState {
 /// the dead zone's edge to full at full deflection.
 pub fn apply_deadzone(value: f64, deadzone: f64) -> f64 {
     let magnitude = value.abs().min(1.0);
-    if magnitude <= deadzone {
+    // A broken axis reading (NaN) counts as centred.
+    if value.is_nan() || magnitude <= deadzone {
         0.0
     } else {
         value.signum() * (magnitude - deadzone) / (1.0 - deadzone)
@@ -194,6 +195,7 @@ mod tests {
         assert!((apply_deadzone(0.55, 0.1) - 0.5).abs() < 1e-12);
         assert_eq!(apply_deadzone(-1.0, 0.1), -1.0);
         assert_eq!(apply_deadzone(1.7, 0.1), 1.0);
+        assert_eq!(apply_deadzone(f64::NAN, 0.1), 0.0);
     }
 
     #[test]

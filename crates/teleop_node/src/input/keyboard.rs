@@ -142,7 +142,7 @@ impl Keyboard {
             );
         }
         let (sender, events) = mpsc::channel();
-        std::thread::Builder::new()
+        let spawned = std::thread::Builder::new()
             .name("keyboard".into())
             .spawn(move || loop {
                 let event = crossterm::event::read();
@@ -150,8 +150,11 @@ impl Keyboard {
                 if sender.send(event).is_err() || failed {
                     break;
                 }
-            })
-            .context("cannot start the keyboard thread")?;
+            });
+        if let Err(error) = spawned {
+            let _ = terminal::disable_raw_mode();
+            return Err(error).context("cannot start the keyboard thread");
+        }
         let mut stdout = std::io::stdout();
         let _ = write!(stdout, "{}\r\n", KEY_HELP.replace('\n', "\r\n"));
         let _ = stdout.flush();

@@ -65,6 +65,8 @@ pub struct Scene {
     pub task_success: bool,
     /// The node's current joint targets (`None` until the arm's position is known).
     pub targets: Option<JointPositions>,
+    /// /sim/reset calls that failed so far.
+    pub reset_failures: u64,
 }
 
 /// A source of operator input.
