@@ -6,6 +6,7 @@
 #   scripts/bench.sh recorder [--seconds S] [--repeats N] [--workdir DIR] [--json FILE]
 #   scripts/bench.sh cameras [--repeats N] [--seconds S] [--frames N] [--json FILE]
 #   scripts/bench.sh expert [--episodes N] [--speed S] [--seed N] [--json FILE]
+#   scripts/bench.sh convert [--episodes N] [--sizes WxH,...] [--json FILE]
 set -euo pipefail
 . "$(dirname "${BASH_SOURCE[0]}")/common.sh"
 REPO_ROOT="${SO101_ROOT}"
@@ -15,7 +16,7 @@ run() {
         --bin-dir "${CARGO_TARGET_DIR}/release" "${@:2}"
 }
 case "${1:-all}" in
-    sim | driver | recorder | cameras | expert) run "$@" ;;
-    all) run sim && run driver && run recorder && run cameras && run expert ;;
-    *) echo "usage: scripts/bench.sh [sim|driver|recorder|cameras|expert] [ARGS...]" >&2; exit 2 ;;
+    sim | driver | recorder | cameras | expert | convert) run "$@" ;;
+    all) run sim && run driver && run recorder && run cameras && run expert && run convert ;;
+    *) echo "usage: scripts/bench.sh [sim|driver|recorder|cameras|expert|convert] [ARGS...]" >&2; exit 2 ;;
 esac

@@ -50,7 +50,8 @@ fi
 
 # The .pth hook written below is part of what a venv must have: bump its version when it changes.
 PTH_VERSION=1
-WANT="requirements=$(sha256_of "${REQUIREMENTS}") python=${PY_VERSION} pth=${PTH_VERSION}"
+PACKAGE="${REPO_ROOT}/scripts/pyproject.toml"
+WANT="requirements=$(sha256_of "${REQUIREMENTS}") package=$(sha256_of "${PACKAGE}") python=${PY_VERSION} pth=${PTH_VERSION}"
 
 # Fast path: nothing changed since the last successful run.
 if [ -x "${VENV}/bin/python" ] && [ -f "${STAMP}" ] && [ "$(cat "${STAMP}")" = "${WANT}" ]; then
@@ -88,6 +89,11 @@ rm -f "${STAMP}"
 log "installing ${REQUIREMENTS#"${REPO_ROOT}"/}"
 "${VENV}/bin/python" -m pip install --quiet --disable-pip-version-check -r "${REQUIREMENTS}"
 
+# The project's own Python package (scripts/so101_lerobot: the bag -> LeRobot converter), editable
+# so the scripts in the checkout are what runs; its dependencies are pinned above.
+"${VENV}/bin/python" -m pip install --quiet --disable-pip-version-check --no-deps --no-build-isolation \
+    --editable "${REPO_ROOT}/scripts"
+
 # Every Python process of the venv gets the project's Fast DDS profile (4 MiB socket buffers, so
 # rclpy receives camera images from the Rust nodes) and RMW unless its environment names others:
 # scripts, tests and one-off `python -c` alike, with no environment to source.
@@ -109,6 +115,7 @@ from diagnostic_msgs.msg import DiagnosticArray  # noqa: F401
 from geometry_msgs.msg import PoseStamped  # noqa: F401
 import pytest  # noqa: F401
 from lerobot.datasets.lerobot_dataset import LeRobotDataset  # noqa: F401
+import so101_lerobot.convert  # noqa: F401
 rmw = get_rmw_implementation_identifier()
 assert rmw == "rmw_fastrtps_cpp", rmw
 import os

@@ -92,11 +92,20 @@ def subscribe_camera(ros, sim, name: str, depth: int = 50):
 
 
 def step(ros, sim, times: int = 1):
+    """`times` /sim/step calls through one client per node: a fresh client per call can see the
+    server's request reader before the server sees its response reader, and lose the answer."""
     from std_srvs.srv import Trigger
 
+    client = getattr(sim, "step_client", None)
+    if client is None:
+        client = ros.node.create_client(Trigger, sim.name("sim/step"))
+        wait_until(client.service_is_ready, 20.0, "/sim/step", sim)
+        time.sleep(0.3)  # both directions of the service matched
+        sim.step_client = client
     for _ in range(times):
-        response = ros.call(Trigger, sim.name("sim/step"), sim=sim)
-        assert response.success, response.message
+        future = client.call_async(Trigger.Request())
+        wait_until(future.done, 10.0, "the response of /sim/step", sim)
+        assert future.result().success, future.result().message
 
 
 # =========================================================================== rate and content

@@ -1,0 +1,149 @@
+"""Reading recorder_node's episode bags: one directory per episode with metadata.yaml and its MCAP
+file(s), read with the `mcap` and `mcap-ros2-support` packages."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+import yaml
+
+from .units import JOINT_NAMES
+
+
+class BagError(Exception):
+    """An episode that cannot be converted, and why."""
+
+
+@dataclass
+class Stream:
+    """Messages of one topic: sim times (s) and values, in time order."""
+
+    times: list[float] = field(default_factory=list)
+    values: list = field(default_factory=list)
+
+
+@dataclass
+class Episode:
+    path: Path
+    task: str
+    success: bool | None
+    seed: str
+    joint_states: Stream
+    joint_commands: Stream
+    reward: Stream
+    task_success: Stream
+    cameras: dict[str, Stream]
+
+
+def episode_dirs(paths: list[Path]) -> list[Path]:
+    """Episode directories: the given ones, and the episode_* directories inside given parents."""
+    found: list[Path] = []
+    for path in paths:
+        if (path / "metadata.yaml").is_file() or any(path.glob("*.mcap")):
+            found.append(path)
+        elif path.is_dir():
+            found.extend(sorted(p for p in path.iterdir() if p.is_dir() and p.name.startswith("episode_")))
+        else:
+            raise BagError(f"{path}: neither an episode directory nor a directory of episodes")
+    return found
+
+
+def _stamp(header) -> float:
+    return header.stamp.sec + header.stamp.nanosec * 1e-9
+
+
+def _positions(msg) -> np.ndarray | None:
+    """The six positions of a JointState in contract order, or None when it does not name them all."""
+    by_name = dict(zip(msg.name, msg.position))
+    if not all(name in by_name for name in JOINT_NAMES):
+        return None
+    return np.array([by_name[name] for name in JOINT_NAMES], dtype=np.float64)
+
+
+def read_episode(path: Path, cameras: list[str] | None) -> Episode:
+    """Everything of one episode the converter uses, in sim time. Raises BagError for an episode
+    that was not closed (no metadata.yaml: the recorder was killed), an unreadable file, or one
+    that misses a stream."""
+    from mcap.reader import make_reader
+    from mcap_ros2.decoder import DecoderFactory
+
+    metadata_file = path / "metadata.yaml"
+    if not metadata_file.is_file():
+        raise BagError(f"{path.name}: no metadata.yaml (the recording was cut short); its bag may be truncated")
+    try:
+        info = yaml.safe_load(metadata_file.read_text())["rosbag2_bagfile_information"]
+    except Exception as error:  # noqa: BLE001 - any malformed file is reported the same way
+        raise BagError(f"{path.name}: unreadable metadata.yaml ({error})") from error
+    custom = info.get("custom_data") or {}
+    files = [path / entry for entry in info.get("relative_file_paths", [])]
+    if not files or not all(f.is_file() for f in files):
+        raise BagError(f"{path.name}: metadata.yaml lists files that are missing: {files}")
+
+    raw_states: list[tuple[float, float, np.ndarray]] = []  # (receive time, stamp, positions)
+    raw_commands: list[tuple[float, np.ndarray]] = []
+    raw_reward: list[tuple[float, float]] = []
+    raw_success: list[tuple[float, bool]] = []
+    raw_images: dict[str, list[tuple[float, np.ndarray]]] = {}
+    for file in files:
+        try:
+            with open(file, "rb") as stream:
+                reader = make_reader(stream, decoder_factories=[DecoderFactory()])
+                for _schema, channel, message, ros in reader.iter_decoded_messages(log_time_order=True):
+                    received = message.log_time * 1e-9
+                    topic = channel.topic
+                    if topic.endswith("/joint_states") and not topic.endswith("leader/joint_states"):
+                        positions = _positions(ros)
+                        if positions is not None:
+                            raw_states.append((received, _stamp(ros.header), positions))
+                    elif topic.endswith("/joint_commands"):
+                        positions = _positions(ros)
+                        if positions is not None:
+                            raw_commands.append((received, positions))
+                    elif topic.endswith("/task/reward"):
+                        raw_reward.append((received, float(ros.data)))
+                    elif topic.endswith("/task/success"):
+                        raw_success.append((received, bool(ros.data)))
+                    elif "/camera/" in topic and topic.endswith("/image_raw"):
+                        name = topic.rstrip("/").split("/")[-2]
+                        if cameras is not None and name not in cameras:
+                            continue
+                        if ros.encoding != "rgb8":
+                            raise BagError(f"{path.name}: {topic} is {ros.encoding}, not rgb8")
+                        image = np.frombuffer(bytes(ros.data), dtype=np.uint8).reshape(ros.height, ros.width, 3)
+                        raw_images.setdefault(name, []).append((_stamp(ros.header), image))
+        except BagError:
+            raise
+        except Exception as error:  # noqa: BLE001 - a damaged file is reported, not fatal
+            raise BagError(f"{path.name}: cannot read {file.name} ({type(error).__name__}: {error})") from error
+
+    if len(raw_states) < 2:
+        raise BagError(f"{path.name}: no /joint_states (observation.state)")
+    if not raw_commands:
+        raise BagError(f"{path.name}: no /joint_commands (action)")
+    for name in cameras or []:
+        if not raw_images.get(name):
+            raise BagError(f"{path.name}: no frames of camera {name!r}")
+
+    from .resample import WallToSim
+
+    to_sim = WallToSim([r for r, _, _ in raw_states], [s for _, s, _ in raw_states])
+
+    def stream(pairs: list[tuple[float, object]], stamped: bool = False) -> Stream:
+        pairs = sorted(pairs, key=lambda pair: pair[0])
+        times = [t for t, _ in pairs] if stamped else list(to_sim([t for t, _ in pairs]))
+        return Stream(times=times, values=[v for _, v in pairs])
+
+    success_text = str(custom.get("success", "")).lower()
+    return Episode(
+        path=path,
+        task=str(custom.get("task") or ""),
+        success={"true": True, "false": False}.get(success_text),
+        seed=str(custom.get("seed", "")),
+        joint_states=stream([(s, p) for _, s, p in raw_states], stamped=True),
+        joint_commands=stream(raw_commands),
+        reward=stream(raw_reward),
+        task_success=stream(raw_success),
+        cameras={name: stream(frames, stamped=True) for name, frames in sorted(raw_images.items())},
+    )

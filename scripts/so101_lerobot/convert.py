@@ -1,0 +1,187 @@
+"""so101-bag-to-lerobot: recorder_node's episode bags -> a LeRobot dataset (codebase v3.0), written
+through LeRobot's own LeRobotDataset API.
+
+Per frame (docs/lerobot.md): observation.state (the arm's /joint_states), action (the
+/joint_commands in force), observation.images.<camera> (video), next.reward, next.success, and
+the episode's task. Units are LeRobot's SO-101 conventions (degrees, gripper 0-100) unless
+--units radians. An episode that cannot be converted faithfully (cut short, unreadable, a stream
+missing) is reported and skipped; the others are converted.
+"""
+
+from __future__ import annotations
+
+import argparse
+import logging
+import sys
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from .bags import BagError, Episode, episode_dirs, read_episode
+from .resample import frame_times, sample_and_hold
+from .units import FEATURE_NAMES, lerobot_from_radians
+
+ROBOT_TYPE = "so_follower"
+log = logging.getLogger("so101_lerobot")
+
+
+@dataclass
+class Frames:
+    """One episode on the frame grid."""
+
+    state: np.ndarray  # [N, 6] float32
+    action: np.ndarray  # [N, 6] float32
+    reward: np.ndarray  # [N] float32
+    success: np.ndarray  # [N] bool
+    images: dict[str, list[np.ndarray]]
+
+
+def frames_of(episode: Episode, fps: float, units: str) -> Frames:
+    """Resamples an episode onto the fps grid (alignment: so101_lerobot.resample)."""
+    streams = {"joint_states": episode.joint_states.times, "joint_commands": episode.joint_commands.times}
+    streams.update({f"camera {name}": stream.times for name, stream in episode.cameras.items()})
+    # Commands stay in force after the last one (a teleop stops sending while holding); every
+    # other stream may be held for one frame past its last message.
+    instants = frame_times(streams, fps, hold_limit={"joint_commands": float("inf")})
+    if len(instants) < 2:
+        raise BagError(f"{episode.path.name}: its streams do not overlap for two frames")
+
+    def held(stream, default):
+        if not stream.times:
+            return [default] * len(instants)
+        indices = [max(0, i) for i in np.searchsorted(stream.times, instants + 1e-9, side="right") - 1]
+        return [stream.values[i] if stream.times[i] <= t + 1e-9 else default for i, t in zip(indices, instants)]
+
+    convert = (lambda v: v) if units == "radians" else lerobot_from_radians
+    state = convert(np.stack([episode.joint_states.values[i] for i in sample_and_hold(episode.joint_states.times, instants)]))
+    action = convert(np.stack([episode.joint_commands.values[i] for i in sample_and_hold(episode.joint_commands.times, instants)]))
+    images = {
+        name: [stream.values[i] for i in sample_and_hold(stream.times, instants)]
+        for name, stream in episode.cameras.items()
+    }
+    return Frames(
+        state=state.astype(np.float32),
+        action=action.astype(np.float32),
+        reward=np.array(held(episode.reward, 0.0), dtype=np.float32),
+        success=np.array(held(episode.task_success, False), dtype=bool),
+        images=images,
+    )
+
+
+def features_for(cameras: dict[str, tuple[int, int]], use_videos: bool) -> dict:
+    features = {
+        "observation.state": {"dtype": "float32", "shape": (6,), "names": FEATURE_NAMES},
+        "action": {"dtype": "float32", "shape": (6,), "names": FEATURE_NAMES},
+        "next.reward": {"dtype": "float32", "shape": (1,), "names": None},
+        "next.success": {"dtype": "bool", "shape": (1,), "names": None},
+    }
+    for name, (height, width) in cameras.items():
+        features[f"observation.images.{name}"] = {
+            "dtype": "video" if use_videos else "image",
+            "shape": (height, width, 3),
+            "names": ["height", "width", "channels"],
+        }
+    return features
+
+
+def convert(args) -> int:
+    from lerobot.datasets.lerobot_dataset import LeRobotDataset
+    from tqdm import tqdm
+
+    paths = episode_dirs([Path(p) for p in args.bags])
+    if not paths:
+        log.error("no episode directories in %s", ", ".join(args.bags))
+        return 1
+    cameras = args.cameras.split(",") if args.cameras else None
+    dataset = None
+    converted, skipped, frames_written = 0, [], 0
+    started = time.monotonic()
+    for path in tqdm(paths, desc="episodes", unit="episode", disable=args.quiet):
+        try:
+            episode = read_episode(path, cameras)
+            if args.successful_only and episode.success is not True:
+                skipped.append(f"{path.name}: not marked successful")
+                continue
+            frames = frames_of(episode, args.fps, args.units)
+        except BagError as error:
+            log.warning("skipped %s", error)
+            skipped.append(str(error))
+            continue
+        shapes = {name: images[0].shape[:2] for name, images in frames.images.items()}
+        if dataset is None:
+            cameras = list(shapes)
+            dataset = LeRobotDataset.create(
+                repo_id=args.repo_id,
+                fps=args.fps,
+                features=features_for(shapes, not args.no_videos),
+                root=args.output,
+                robot_type=ROBOT_TYPE,
+                use_videos=not args.no_videos,
+            )
+        elif list(shapes) != cameras or any(dataset.features[f"observation.images.{n}"]["shape"][:2] != tuple(s) for n, s in shapes.items()):
+            error = f"{path.name}: cameras {shapes} differ from the dataset's ({cameras})"
+            log.warning("skipped %s", error)
+            skipped.append(error)
+            continue
+        task = episode.task or args.task
+        for k in range(len(frames.state)):
+            frame = {
+                "observation.state": frames.state[k],
+                "action": frames.action[k],
+                "next.reward": frames.reward[k : k + 1],
+                "next.success": frames.success[k : k + 1],
+                "task": task,
+            }
+            for name, images in frames.images.items():
+                frame[f"observation.images.{name}"] = images[k]
+            dataset.add_frame(frame)
+        dataset.save_episode(parallel_encoding=not args.sequential_encoding)
+        converted += 1
+        frames_written += len(frames.state)
+    if dataset is not None:
+        dataset.finalize()
+        if args.push_to_hub:
+            dataset.push_to_hub(private=args.private)
+    seconds = time.monotonic() - started
+    summary = (
+        f"{converted} episode(s), {frames_written} frames at {args.fps} fps -> {args.output} "
+        f"({seconds:.1f} s, {frames_written / max(seconds, 1e-9):.0f} frames/s); {len(skipped)} skipped"
+    )
+    print(summary)
+    for reason in skipped:
+        print(f"  skipped: {reason}")
+    return 0 if converted else 1
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(prog="so101-bag-to-lerobot", description=__doc__,
+                                     formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("bags", nargs="+", help="episode bag directories, or directories holding episode_* directories")
+    parser.add_argument("--output", type=Path, required=True, help="dataset root directory (must not exist yet)")
+    parser.add_argument("--repo-id", default="local/so101_cube_to_bin", help="dataset id (Hub repo id when pushed)")
+    parser.add_argument("--fps", type=int, default=30, help="frames per second of the dataset")
+    parser.add_argument("--units", choices=["lerobot", "radians"], default="lerobot",
+                        help="joint units: LeRobot's SO-101 conventions (degrees, gripper 0-100) or the stack's radians")
+    parser.add_argument("--cameras", default=None, help="cameras to keep, comma-separated (default: every camera in the bags)")
+    parser.add_argument("--task", default="put the cube in the bin", help="task text of episodes whose bag names none")
+    parser.add_argument("--successful-only", action="store_true", help="keep only episodes marked successful")
+    parser.add_argument("--no-videos", action="store_true", help="store camera frames as images, not video")
+    parser.add_argument("--sequential-encoding", action="store_true", help="encode one camera's video at a time")
+    parser.add_argument("--push-to-hub", action="store_true", help="upload the dataset to the Hugging Face Hub (--repo-id)")
+    parser.add_argument("--private", action="store_true", help="with --push-to-hub: a private repo")
+    parser.add_argument("--quiet", action="store_true", help="no progress bar")
+    args = parser.parse_args(argv)
+    if args.fps <= 0:
+        parser.error("--fps must be positive")
+    logging.basicConfig(level=logging.INFO, format="%(levelname)s %(name)s: %(message)s")
+    try:
+        return convert(args)
+    except BagError as error:
+        log.error("%s", error)
+        return 1
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,57 @@
+"""Putting streams recorded at their own rates onto the dataset's frame grid. Pure functions.
+
+Alignment (also in docs/lerobot.md): every stream is a list of (time, value) in sim time. Frame k
+of an episode is at t_k = t_0 + k / fps, where t_0 is the first instant at which every stream has
+delivered a message. Each stream contributes its latest value at or before t_k (zero-order hold:
+what the policy would have seen, or the command in force, at that instant). The episode ends at
+the last t_k not later than the end of the shortest stream plus one of its periods, so no frame
+holds a value far beyond its stream's last message.
+"""
+
+from __future__ import annotations
+
+import bisect
+
+import numpy as np
+
+
+def frame_times(streams: dict[str, list[float]], fps: float, hold_limit: dict[str, float] | None = None) -> np.ndarray:
+    """The frame instants for streams with the given (sorted) message times. `hold_limit` gives,
+    per stream, how long past its last message a value may be held (default: one frame)."""
+    if not streams or any(len(times) == 0 for times in streams.values()):
+        return np.zeros(0)
+    start = max(times[0] for times in streams.values())
+    limits = hold_limit or {}
+    end = min(times[-1] + limits.get(name, 1.0 / fps) for name, times in streams.items())
+    if end < start:
+        return np.zeros(0)
+    count = int(np.floor((end - start) * fps + 1e-9)) + 1
+    return start + np.arange(count) / fps
+
+
+def sample_and_hold(times: list[float], instants: np.ndarray) -> np.ndarray:
+    """Index of the latest message at or before each instant (every instant must be at or after
+    the first message)."""
+    indices = np.array([bisect.bisect_right(times, t + 1e-9) - 1 for t in instants], dtype=np.int64)
+    if len(indices) and indices.min() < 0:
+        raise ValueError("an instant lies before the stream's first message")
+    return indices
+
+
+class WallToSim:
+    """Maps recorder receive times (wall clock) to sim time through messages that carry both (the
+    joint states: header stamp = sim time), so streams without a stamp of their own can be placed
+    on the sim's clock whatever the sim's speed was."""
+
+    def __init__(self, wall: list[float], sim: list[float]):
+        if len(wall) < 2:
+            raise ValueError("too few stamped messages to map receive times to sim time")
+        order = np.argsort(wall)
+        self.wall = np.asarray(wall, dtype=np.float64)[order]
+        self.sim = np.asarray(sim, dtype=np.float64)[order]
+        # A receive time is at least as late as the sim time it carried: the running maximum keeps
+        # the map monotonic despite delivery jitter.
+        self.sim = np.maximum.accumulate(self.sim)
+
+    def __call__(self, wall_times) -> np.ndarray:
+        return np.interp(np.asarray(wall_times, dtype=np.float64), self.wall, self.sim)

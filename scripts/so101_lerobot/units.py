@@ -1,0 +1,35 @@
+"""Joint units: the topic contract speaks radians (REP-103); LeRobot's SO-101 datasets use degrees
+for the five arm joints and 0-100 for the gripper (0 closed, 100 open)."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+JOINT_NAMES = ["shoulder_pan", "shoulder_lift", "elbow_flex", "wrist_flex", "wrist_roll", "gripper"]
+# LeRobot's feature names for state and action.
+FEATURE_NAMES = [f"{name}.pos" for name in JOINT_NAMES]
+# The gripper's range in the stack (the model's limits, shared by sim and driver), rad.
+GRIPPER_CLOSED, GRIPPER_OPEN = -0.1745, 1.7453
+
+
+def lerobot_from_radians(positions: np.ndarray) -> np.ndarray:
+    """[..., 6] radians in contract order -> LeRobot units: degrees for the arm (LeRobot's DEGREES
+    mode, the same numbers LeRobot records from a calibrated arm), the gripper's position in its
+    range as 0-100 (RANGE_0_100)."""
+    positions = np.asarray(positions, dtype=np.float64)
+    out = np.degrees(positions)
+    out[..., 5] = (positions[..., 5] - GRIPPER_CLOSED) / (GRIPPER_OPEN - GRIPPER_CLOSED) * 100.0
+    return out
+
+
+def radians_from_lerobot(values: np.ndarray) -> np.ndarray:
+    """The inverse of lerobot_from_radians."""
+    values = np.asarray(values, dtype=np.float64)
+    out = np.radians(values)
+    out[..., 5] = GRIPPER_CLOSED + values[..., 5] / 100.0 * (GRIPPER_OPEN - GRIPPER_CLOSED)
+    return out
+
+
+assert math.isclose(float(lerobot_from_radians(np.array([0, 0, 0, 0, 0, GRIPPER_OPEN]))[5]), 100.0)

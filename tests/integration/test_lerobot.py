@@ -1,0 +1,104 @@
+"""From bags to LeRobot: episodes recorded by recorder_node from the sim and the scripted expert,
+converted by so101-bag-to-lerobot, loaded back by LeRobot's own LeRobotDataset; frame counts,
+state, action, images, task and success checked against the bags (read here with the `mcap`
+reader); a truncated episode is reported and skipped."""
+
+from __future__ import annotations
+
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+
+from harness import wait_until
+
+JOINTS = ["shoulder_pan", "shoulder_lift", "elbow_flex", "wrist_flex", "wrist_roll", "gripper"]
+CONVERTER = Path(sys.executable).parent / "so101-bag-to-lerobot"
+
+
+def bag_messages(episode: Path, topic: str) -> list[tuple[float, object]]:
+    """(header stamp in s, message) of a stamped topic, read with mcap's own reader."""
+    from mcap.reader import make_reader
+    from mcap_ros2.decoder import DecoderFactory
+
+    out = []
+    for file in sorted(episode.glob("*.mcap")):
+        with open(file, "rb") as f:
+            for _s, _c, _m, ros in make_reader(f, decoder_factories=[DecoderFactory()]).iter_decoded_messages(topics=[topic]):
+                out.append((ros.header.stamp.sec + ros.header.stamp.nanosec * 1e-9, ros))
+    return sorted(out, key=lambda pair: pair[0])
+
+
+def lerobot_units(radians: list[float]) -> np.ndarray:
+    """LeRobot's SO-101 units computed here: degrees, gripper 0-100 over its model range."""
+    values = np.degrees(np.asarray(radians, dtype=np.float64))
+    values[5] = (radians[5] + 0.1745) / (1.7453 + 0.1745) * 100
+    return values
+
+
+def test_expert_bags_become_a_lerobot_dataset_that_lerobot_loads(sim_factory, recorder_factory, teleop_factory, ros, tmp_path):
+    sim = sim_factory("--speed", "2", "--seed", "3", "--cameras", "top:64x48,wrist:64x48", "--camera-rate", "30")
+    recorder = recorder_factory()
+    wait_until(lambda: ros.node.count_subscribers("/episode/events") >= 1, 20.0, "the recorder", sim)
+    teleop = teleop_factory("--source", "expert", "--sim-time", "--episodes", "2", "--seed", "2")
+    wait_until(lambda: not teleop.alive(), 120.0, "the expert's 2 episodes", sim)
+    bags = recorder.output
+    wait_until(lambda: len([d for d in bags.glob("episode_*") if (d / "metadata.yaml").is_file()]) == 2, 20.0, "2 closed episodes", sim)
+
+    # A third episode directory cut short (no metadata.yaml, as after a kill -9).
+    broken = bags / "episode_000002"
+    shutil.copytree(bags / "episode_000001", broken)
+    (broken / "metadata.yaml").unlink()
+
+    output = tmp_path / "dataset"
+    done = subprocess.run([str(CONVERTER), str(bags), "--output", str(output), "--repo-id", "local/so101_test", "--quiet"],
+                          capture_output=True, text=True, timeout=300)
+    assert done.returncode == 0, done.stdout + done.stderr
+    assert "2 episode(s)" in done.stdout and "1 skipped" in done.stdout and "episode_000002" in done.stdout, done.stdout
+
+    from lerobot.datasets.lerobot_dataset import LeRobotDataset
+
+    dataset = LeRobotDataset("local/so101_test", root=output)
+    assert dataset.meta.info["codebase_version"] == "v3.0"
+    assert dataset.meta.robot_type == "so_follower" and dataset.fps == 30
+    assert dataset.num_episodes == 2
+    assert dataset.features["observation.state"]["names"] == [f"{j}.pos" for j in JOINTS]
+    assert dataset.features["observation.images.top"]["shape"] == (48, 64, 3)
+    assert dataset.features["observation.images.top"]["dtype"] == "video"
+
+    for episode_index, directory in enumerate(sorted(bags.glob("episode_00000[01]"))):
+        states = bag_messages(directory, "/joint_states")
+        frames = bag_messages(directory, "/camera/top/image_raw")
+        start, stop = dataset.meta.episodes["dataset_from_index"][episode_index], dataset.meta.episodes["dataset_to_index"][episode_index]
+        count = stop - start
+        span = min(states[-1][0], frames[-1][0]) - max(states[0][0], frames[0][0])
+        assert abs(count - span * 30) <= 2, f"episode {episode_index}: {count} frames for {span:.2f} s at 30 fps"
+        # Every state row is one of the bag's joint states (in LeRobot units), taken ~1/30 s apart.
+        table = np.stack([lerobot_units([dict(zip(m.name, m.position))[j] for j in JOINTS]) for _, m in states])
+        matched = []
+        for k in range(start, stop, 7):
+            item = dataset[k]
+            row = item["observation.state"].numpy().astype(np.float64)
+            errors = np.abs(table - row).max(axis=1)
+            best = int(errors.argmin())
+            assert errors[best] < 1e-3, f"frame {k}: state {row} is no joint state of the bag (closest off by {errors[best]})"
+            matched.append((k, states[best][0]))
+            assert item["task"] == "put the cube in the bin"
+            assert tuple(item["observation.images.top"].shape) == (3, 48, 64)
+        gaps = [(t2 - t1) / (k2 - k1) for (k1, t1), (k2, t2) in zip(matched, matched[1:])]
+        assert all(abs(gap - 1 / 30) < 0.004 for gap in gaps), f"sim time per frame {gaps}"
+        # The video frame matches the bag's image of that instant.
+        k = start + count // 2
+        item = dataset[k]
+        instant = matched[0][1] + (k - start) / 30
+        stamp, image = min(frames, key=lambda pair: abs(pair[0] - instant))
+        original = np.frombuffer(bytes(image.data), dtype=np.uint8).reshape(48, 64, 3).astype(np.float64)
+        decoded = item["observation.images.top"].numpy().transpose(1, 2, 0) * 255.0
+        assert np.abs(decoded - original).mean() < 25, f"video frame {k} far from the bag's image at {stamp}"
+        # Actions are commands within the joint limits, in LeRobot units; the expert's success shows.
+        actions = np.stack([dataset[i]["action"].numpy() for i in range(start, stop, 10)])
+        assert actions[:, 5].min() < 5 and actions[:, 5].max() > 50, "the gripper never closed and opened in the actions"
+        last = dataset[stop - 1]
+        assert bool(last["next.success"].item()) is True, f"episode {episode_index} does not end in success"
