@@ -2,8 +2,10 @@
 # One-time (and idempotent) set-up of everything the stack needs on a Debian 12 machine:
 #   1. Debian packages: MuJoCo 2.2.2 (libmujoco-dev; libmujoco-samples for the mujoco-testspeed
 #      benchmark anchor), libclang for the bindings, a C toolchain, unshare/ip for the private
-#      network namespaces the tests and nodes run in.
-#   2. The Python venv .venv (Jazzy rclpy wheels, Fast DDS, pytest): scripts/setup_python.sh.
+#      network namespaces the tests and nodes run in, libudev (gamepads), Mesa's EGL and OSMesa
+#      (headless rendering of the cameras), FFmpeg's libraries (LeRobot decodes videos with them).
+#   2. The Python venv .venv (CPython 3.12: Jazzy rclpy wheels, Fast DDS, LeRobot, pytest, the
+#      project's so101_lerobot package): scripts/setup_python.sh.
 #   3. The third-party SO-101 meshes (pinned + checksum): scripts/fetch_assets.sh.
 #   4. A release build of the Rust workspace into $CARGO_TARGET_DIR.
 # Each step skips what is already in place, so a second run takes seconds.
@@ -13,7 +15,8 @@ set -euo pipefail
 REPO_ROOT="${SO101_ROOT}"
 APT_PACKAGES=(libmujoco-dev libmujoco-samples libclang-dev gcc libc6-dev iproute2 util-linux python3-venv
               libudev-dev pkg-config
-              libegl1 libegl-mesa0 libgl1-mesa-dri libosmesa6)
+              libegl1 libegl-mesa0 libgl1-mesa-dri libosmesa6
+              libavutil57 libavcodec59 libavformat59 libavdevice59 libavfilter8 libswscale6 libswresample4)
 MIN_RUST=1.87.0
 
 log() { printf '\033[1msetup:\033[0m %s\n' "$*" >&2; }

@@ -61,11 +61,16 @@ def frames_of(episode: Episode, fps: float, units: str) -> Frames:
         name: [stream.values[i] for i in sample_and_hold(stream.times, instants)]
         for name, stream in episode.cameras.items()
     }
+    success = np.array(held(episode.task_success, False), dtype=bool)
+    if episode.success is not None:
+        # The episode's verdict (metadata.yaml, from the operator or the expert) is its last
+        # frame's: the recording may stop before the sim's /task/success of that instant arrived.
+        success[-1] = episode.success
     return Frames(
         state=state.astype(np.float32),
         action=action.astype(np.float32),
         reward=np.array(held(episode.reward, 0.0), dtype=np.float32),
-        success=np.array(held(episode.task_success, False), dtype=bool),
+        success=success,
         images=images,
     )
 

@@ -61,7 +61,7 @@ def test_expert_bags_become_a_lerobot_dataset_that_lerobot_loads(sim_factory, re
     from lerobot.datasets.lerobot_dataset import LeRobotDataset
 
     dataset = LeRobotDataset("local/so101_test", root=output)
-    assert dataset.meta.info["codebase_version"] == "v3.0"
+    assert dataset.meta.info.codebase_version == "v3.0"
     assert dataset.meta.robot_type == "so_follower" and dataset.fps == 30
     assert dataset.num_episodes == 2
     assert dataset.features["observation.state"]["names"] == [f"{j}.pos" for j in JOINTS]

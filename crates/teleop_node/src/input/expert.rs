@@ -19,6 +19,8 @@ use crate::{
 const SETTLE_MESSAGES: u64 = 30;
 /// Seconds to wait for the settled cube and the arm's pose before the episode counts as failed.
 const SETTLE_TIMEOUT: f64 = 10.0;
+/// Seconds the episode goes on once /task/success is true.
+const SUCCESS_SHOWN_SECONDS: f64 = 0.5;
 /// Seconds after the plan's end for /task/success to turn true.
 const JUDGE_SECONDS: f64 = 1.5;
 
@@ -48,6 +50,8 @@ enum State {
     Judge {
         until: f64,
         cube: [f64; 4],
+        /// When /task/success turned true.
+        succeeded_at: Option<f64>,
     },
     Finished,
 }
@@ -217,14 +221,26 @@ impl Source for Expert {
                     self.state = State::Judge {
                         until: tick.now + JUDGE_SECONDS,
                         cube,
+                        succeeded_at: None,
                     };
                 }
                 Request::Targets(targets)
             }
-            State::Judge { until, cube } => {
+            State::Judge {
+                until,
+                cube,
+                succeeded_at,
+            } => {
                 let (until, cube) = (*until, *cube);
-                if tick.scene.task_success {
-                    self.finish(true, true, cube, "cube in the bin".into(), &mut controls);
+                if tick.scene.task_success && succeeded_at.is_none() {
+                    *succeeded_at = Some(tick.now);
+                }
+                if let Some(at) = *succeeded_at {
+                    // The episode goes on a moment with the cube in the bin, so its recording
+                    // ends on the success it is marked with.
+                    if tick.now >= at + SUCCESS_SHOWN_SECONDS {
+                        self.finish(true, true, cube, "cube in the bin".into(), &mut controls);
+                    }
                 } else if tick.now > until {
                     let note = match tick.scene.cube {
                         Some(([x, y, z], _)) => {
