@@ -12,10 +12,11 @@ from pathlib import Path
 
 import numpy as np
 
-from harness import wait_until
+from harness import best_effort_qos, wait_until
 
 JOINTS = ["shoulder_pan", "shoulder_lift", "elbow_flex", "wrist_flex", "wrist_roll", "gripper"]
 CONVERTER = Path(sys.executable).parent / "so101-bag-to-lerobot"
+REPLAY = Path(sys.executable).parent / "so101-replay"
 
 
 def bag_messages(episode: Path, topic: str) -> list[tuple[float, object]]:
@@ -38,7 +39,7 @@ def lerobot_units(radians: list[float]) -> np.ndarray:
     return values
 
 
-def test_expert_bags_become_a_lerobot_dataset_that_lerobot_loads(sim_factory, recorder_factory, teleop_factory, ros, tmp_path):
+def test_expert_bags_become_a_lerobot_dataset_that_lerobot_loads_and_replays(sim_factory, recorder_factory, teleop_factory, ros, tmp_path):
     sim = sim_factory("--speed", "2", "--seed", "3", "--cameras", "top:64x48,wrist:64x48", "--camera-rate", "30")
     recorder = recorder_factory()
     wait_until(lambda: ros.node.count_subscribers("/episode/events") >= 1, 20.0, "the recorder", sim)
@@ -102,3 +103,14 @@ def test_expert_bags_become_a_lerobot_dataset_that_lerobot_loads(sim_factory, re
         assert actions[:, 5].min() < 5 and actions[:, 5].max() > 50, "the gripper never closed and opened in the actions"
         last = dataset[stop - 1]
         assert bool(last["next.success"].item()) is True, f"episode {episode_index} does not end in success"
+
+    # Replayed on a fresh sim with the same seed (its first /sim/reset puts the cube where the
+    # first episode had it), the dataset's actions put the cube in the bin again.
+    from std_msgs.msg import Bool
+
+    sim_factory("--seed", "3", "--cameras", "none", "--namespace", "replay")
+    success = ros.subscribe("/replay/task/success", Bool, best_effort_qos())
+    done = subprocess.run([str(REPLAY), str(output), "--repo-id", "local/so101_test", "--episode", "0", "--reset",
+                           "--namespace", "replay", "--ramp", "1"], capture_output=True, text=True, timeout=120)
+    assert done.returncode == 0 and "replayed" in done.stdout, done.stdout + done.stderr
+    wait_until(lambda: success.count() > 0 and success.latest().data, 5.0, "/task/success after the replay")

@@ -1,0 +1,115 @@
+"""so101-replay: send the recorded actions of one episode, from a LeRobot dataset or an episode
+bag, to the arm (the sim or the real driver) on /joint_commands, at their recorded rate.
+
+The arm is first brought from where it is to the episode's first action in --ramp seconds, so
+the replay never starts with a jump. Run it inside scripts/isolated with the arm's node.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+from .units import JOINT_NAMES, radians_from_lerobot
+
+
+def actions_from_dataset(root: Path, repo_id: str, episode: int, units: str) -> tuple[np.ndarray, np.ndarray]:
+    """(seconds from the episode's start, actions in radians [N, 6]) of a dataset episode."""
+    from lerobot.datasets.lerobot_dataset import LeRobotDataset
+
+    dataset = LeRobotDataset(repo_id, root=root, episodes=[episode])
+    frames = dataset.hf_dataset.with_format("numpy")
+    actions = np.asarray(frames["action"], dtype=np.float64)
+    if len(actions) == 0:
+        raise SystemExit(f"so101-replay: episode {episode} of {root} has no frames")
+    if units == "lerobot":
+        actions = radians_from_lerobot(actions)
+    return np.arange(len(actions)) / dataset.fps, actions
+
+
+def actions_from_bag(path: Path) -> tuple[np.ndarray, np.ndarray]:
+    """(seconds from the first command, commands in radians [N, 6]) of an episode bag."""
+    from .bags import BagError, read_episode
+
+    try:
+        episode = read_episode(path, cameras=[])
+    except BagError as error:
+        raise SystemExit(f"so101-replay: {error}") from error
+    times = np.asarray(episode.joint_commands.times)
+    return times - times[0], np.stack(episode.joint_commands.values)
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(prog="so101-replay", description=__doc__,
+                                     formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("source", type=Path, help="a LeRobot dataset root, or an episode bag directory")
+    parser.add_argument("--episode", type=int, default=0, help="dataset episode index")
+    parser.add_argument("--repo-id", default="local/so101_cube_to_bin", help="the dataset's repo id")
+    parser.add_argument("--units", choices=["lerobot", "radians"], default="lerobot", help="the dataset's joint units")
+    parser.add_argument("--namespace", default="", help="the arm's namespace (topics under /NAMESPACE/)")
+    parser.add_argument("--ramp", type=float, default=2.0, help="seconds to move to the first action")
+    parser.add_argument("--reset", action="store_true", help="call /sim/reset first (simulation)")
+    args = parser.parse_args(argv)
+
+    if (args.source / "meta" / "info.json").is_file():
+        offsets, actions = actions_from_dataset(args.source, args.repo_id, args.episode, args.units)
+    else:
+        offsets, actions = actions_from_bag(args.source)
+
+    import rclpy
+    from sensor_msgs.msg import JointState
+    from std_srvs.srv import Trigger
+
+    prefix = "/" + args.namespace.strip("/") if args.namespace.strip("/") else ""
+    rclpy.init()
+    node = rclpy.create_node("so101_replay")
+    publisher = node.create_publisher(JointState, f"{prefix}/joint_commands", 10)
+    latest: dict = {}
+    node.create_subscription(JointState, f"{prefix}/joint_states", lambda m: latest.__setitem__("state", m), 10)
+
+    def spin_until(predicate, timeout: float, what: str):
+        deadline = time.monotonic() + timeout
+        while not predicate():
+            if time.monotonic() > deadline:
+                raise SystemExit(f"so101-replay: no {what} within {timeout:.0f} s (is the arm's node running?)")
+            rclpy.spin_once(node, timeout_sec=0.05)
+
+    try:
+        if args.reset:
+            client = node.create_client(Trigger, f"{prefix}/sim/reset")
+            spin_until(client.service_is_ready, 20.0, "/sim/reset service")
+            future = client.call_async(Trigger.Request())
+            spin_until(future.done, 10.0, "/sim/reset answer")
+            latest.clear()
+        spin_until(lambda: "state" in latest, 20.0, "/joint_states")
+        spin_until(lambda: publisher.get_subscription_count() > 0, 20.0, "subscriber of /joint_commands")
+        positions = dict(zip(latest["state"].name, latest["state"].position))
+        start = np.array([positions[name] for name in JOINT_NAMES])
+
+        def send(values: np.ndarray):
+            publisher.publish(JointState(name=JOINT_NAMES, position=[float(v) for v in values]))
+
+        period = 1.0 / 50
+        ramp_steps = max(1, int(args.ramp / period))
+        begun = time.monotonic()
+        for k in range(1, ramp_steps + 1):
+            send(start + (actions[0] - start) * k / ramp_steps)
+            rclpy.spin_once(node, timeout_sec=max(0.0, begun + k * period - time.monotonic()))
+        begun = time.monotonic()
+        for offset, action in zip(offsets, actions):
+            while (wait := begun + offset - time.monotonic()) > 0:
+                rclpy.spin_once(node, timeout_sec=wait)
+            send(action)
+        print(f"replayed {len(actions)} actions over {offsets[-1]:.1f} s")
+    finally:
+        node.destroy_node()
+        rclpy.try_shutdown()
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
