@@ -175,12 +175,21 @@ def test_the_watchdog_holds_position_when_commands_stop(arm_factory, ros):
     start = dict(zip(inbox.latest().name, inbox.latest().position))
     pub = ros.publisher("/joint_commands", type(joint_command({})), sim=node)
     target = start["shoulder_pan"] + 1.5
-    for _ in range(3):  # a short burst (a first message can race discovery), then silence
+
+    def pan() -> float:
+        return dict(zip(inbox.latest().name, inbox.latest().position))["shoulder_pan"]
+
+    # Commands until the arm moves (the driver's reader may match the publisher a moment after
+    # rclpy sees the subscription: early messages can be lost), then silence.
+    deadline = time.monotonic() + 10
+    while pan() < start["shoulder_pan"] + 0.02:
+        assert time.monotonic() < deadline, "the arm never started towards the command"
         pub.publish(joint_command({"shoulder_pan": target}))
         time.sleep(0.02)
+    moving = pan()
     time.sleep(1.5)
-    held = dict(zip(inbox.latest().name, inbox.latest().position))["shoulder_pan"]
-    assert start["shoulder_pan"] + 0.1 < held < target - 0.4, f"moved from {start['shoulder_pan']} to {held}: expected a stop part-way to {target}"
+    held = pan()
+    assert moving + 0.05 < held < target - 0.4, f"moved from {moving} to {held}: expected a stop part-way to {target}"
     time.sleep(0.5)
     still = dict(zip(inbox.latest().name, inbox.latest().position))["shoulder_pan"]
     assert abs(still - held) < 0.01, "the arm kept going after the watchdog fired"
@@ -213,7 +222,7 @@ def test_torque_service_switches_every_servo(arm_factory, ros):
 
 
 def test_a_silent_servo_stops_goals_and_states_until_it_answers_again(arm_factory, ros):
-    node, emulator = arm_factory("--retries", "1", "--bus-slack-ms", "3", "--reopen-after", "30")
+    node, emulator = arm_factory("--retries", "1", "--reopen-after", "30")
     diagnostics = subscribe_diagnostics(ros)
     inbox = subscribe_joint_states(ros)
     inbox.wait_count(1, 30.0, node)
@@ -367,11 +376,12 @@ def test_a_wrong_calibration_file_never_moves_a_servo(arm_factory, tmp_path):
 def test_shutdown_with_the_servos_silent_still_turns_torque_off(arm_factory, ros):
     # Every reply lost: the driver goes disconnected; on exit it broadcasts torque off, which the
     # servos obey without answering.
-    node, emulator = arm_factory("--reopen-after", "0.3", "--retries", "0", "--bus-slack-ms", "2")
+    # One retry and some slack: a start-up read must survive a scheduling hiccup of the emulator
+    # on a loaded machine (with none, one late reply failed the start in a CI run).
+    node, emulator = arm_factory("--reopen-after", "0.3", "--retries", "1", "--bus-slack-ms", "10")
     subscribe_joint_states(ros).wait_count(1, 30.0, node)
     assert all(slot["torque_enable"] == 1 for slot in emulator.slots())
     emulator.command("drop 1")
-    time.sleep(1.5)
-    assert "bus lost" in node.log(), node.log_tail()
+    wait_until(lambda: "bus lost" in node.log(), 5.0, "the driver to report the bus lost", node)
     assert node.stop() == 0
     assert all(slot["torque_enable"] == 0 for slot in emulator.slots()), emulator.slots()
