@@ -1,0 +1,185 @@
+"""Gymnasium environments over so101_sim_node in lockstep: `so101/CubeToBin-v0` and
+`so101/TouchCube-v0`, registered when this module is imported
+(`gym.make("so101_lerobot.gym_env:so101/CubeToBin-v0")` imports it by itself). Each environment
+starts its own sim node, under a namespace of its own, and talks to it through rclpy: a step publishes the action on /joint_commands and calls
+/sim/step, so Stable-Baselines3, imitation and the like run against the stack's real interface.
+
+Must run inside the network namespace of scripts/isolated (DDS traffic stays on the machine).
+Observation (float32[19]): joint positions (6, rad), joint velocities (6, rad/s), cube position
+(3, m, world), cube orientation (4, w x y z). Action (float32[6]): joint position targets (rad),
+within the joint limits. Reward: /task/reward; terminated: /task/success (cube_to_bin); episodes
+are truncated by the registration's max_episode_steps.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import os
+import subprocess
+import tempfile
+import time
+from pathlib import Path
+
+import gymnasium as gym
+import numpy as np
+from gymnasium import spaces
+
+from .units import JOINT_NAMES
+
+LIMITS = np.array([(-1.9199, 1.9199), (-1.7453, 1.7453), (-1.69, 1.69), (-1.6581, 1.6581), (-2.7438, 2.8412), (-0.1745, 1.7453)])
+REPO_ROOT = Path(__file__).resolve().parents[2]
+
+
+def sim_binary() -> Path:
+    """so101_sim_node of this checkout: $SO101_BIN_DIR, else the build directory scripts/common.sh
+    uses ($CARGO_TARGET_DIR, or one per checkout under ~/.cache/so101)."""
+    if os.environ.get("SO101_BIN_DIR"):
+        return Path(os.environ["SO101_BIN_DIR"]) / "so101_sim_node"
+    target = os.environ.get("CARGO_TARGET_DIR") or (
+        Path.home() / ".cache" / "so101" / f"target-{hashlib.sha256(str(REPO_ROOT).encode()).hexdigest()[:12]}"
+    )
+    return Path(target) / "release" / "so101_sim_node"
+
+
+class So101SimEnv(gym.Env):
+    metadata = {"render_modes": []}
+
+    def __init__(self, task: str = "cube_to_bin", control_rate: float = 30.0, lite: bool = True, timeout: float = 20.0):
+        import rclpy
+        from geometry_msgs.msg import PoseStamped
+        from rclpy.executors import SingleThreadedExecutor
+        from sensor_msgs.msg import JointState
+        from std_msgs.msg import Bool, Float64
+        from std_srvs.srv import Trigger
+
+        self.action_space = spaces.Box(LIMITS[:, 0].astype(np.float32), LIMITS[:, 1].astype(np.float32), dtype=np.float32)
+        self.observation_space = spaces.Box(-np.inf, np.inf, shape=(19,), dtype=np.float32)
+        self._task, self._rate, self._lite, self._timeout = task, control_rate, lite, timeout
+        self._namespace = f"gym_{os.getpid()}_{id(self) % 100000}"
+        self._process: subprocess.Popen | None = None
+        self._log = tempfile.NamedTemporaryFile(prefix="so101_gym_sim_", suffix=".log", delete=False)
+        self._context = rclpy.Context()
+        rclpy.init(context=self._context)
+        self._node = rclpy.create_node("so101_gym", context=self._context, start_parameter_services=False)
+        self._executor = SingleThreadedExecutor(context=self._context)
+        self._executor.add_node(self._node)
+        ns = f"/{self._namespace}"
+        self._latest: dict = {}
+        self._counts = {"state": 0, "cube": 0, "reward": 0, "success": 0}
+
+        def keep(key):
+            def callback(msg):
+                self._latest[key] = msg
+                if key in self._counts:
+                    self._counts[key] += 1
+            return callback
+
+        self._node.create_subscription(JointState, f"{ns}/joint_states", keep("state"), 10)
+        self._node.create_subscription(PoseStamped, f"{ns}/cube/pose", keep("cube"), 10)
+        self._node.create_subscription(Float64, f"{ns}/task/reward", keep("reward"), 10)
+        self._node.create_subscription(Bool, f"{ns}/task/success", keep("success"), 10)
+        self._commands = self._node.create_publisher(JointState, f"{ns}/joint_commands", 10)
+        self._step_client = self._node.create_client(Trigger, f"{ns}/sim/step")
+        self._reset_client = self._node.create_client(Trigger, f"{ns}/sim/reset")
+        self._trigger = Trigger.Request
+        self._JointState = JointState
+
+    # ------------------------------------------------------------------ plumbing
+    def _spin_until(self, predicate, what: str) -> None:
+        deadline = time.monotonic() + self._timeout
+        while not predicate():
+            if self._process is not None and self._process.poll() is not None:
+                raise RuntimeError(f"so101_sim_node exited with {self._process.returncode} (log: {self._log.name})")
+            if time.monotonic() > deadline:
+                raise TimeoutError(f"no {what} from so101_sim_node within {self._timeout} s (log: {self._log.name})")
+            self._executor.spin_once(timeout_sec=0.01)
+
+    def _call(self, client, what: str):
+        future = client.call_async(self._trigger())
+        self._spin_until(future.done, what)
+        response = future.result()
+        if not response.success:
+            raise RuntimeError(f"{what} failed: {response.message}")
+        return response
+
+    def _start_sim(self, seed: int) -> None:
+        self._stop_sim()
+        binary = sim_binary()
+        if not binary.is_file():
+            raise FileNotFoundError(f"{binary} not found: build the workspace (scripts/setup.sh) or set SO101_BIN_DIR")
+        command = [str(binary), "--lockstep", "--rate", str(self._rate), "--task", self._task, "--seed", str(seed),
+                   "--cameras", "none", "--namespace", self._namespace]
+        if self._lite:
+            command.append("--lite")
+        env = {k: v for k, v in os.environ.items() if k != "LD_LIBRARY_PATH"}
+        self._process = subprocess.Popen(command, env=env, stdin=subprocess.DEVNULL, stdout=self._log, stderr=self._log)
+        self._spin_until(lambda: self._step_client.service_is_ready() and self._reset_client.service_is_ready(), "services")
+        self._spin_until(lambda: self._commands.get_subscription_count() > 0, "/joint_commands subscription")
+        # Both directions of each service matched, and the start-up state taken in.
+        settle = time.monotonic() + 0.5
+        while time.monotonic() < settle:
+            self._executor.spin_once(timeout_sec=0.01)
+
+    def _stop_sim(self) -> None:
+        if self._process is not None and self._process.poll() is None:
+            self._process.send_signal(2)
+            try:
+                self._process.wait(timeout=10)
+            except subprocess.TimeoutExpired:
+                self._process.kill()
+        self._process = None
+        self._latest.clear()
+
+    def _observe(self, counts: dict) -> np.ndarray:
+        """The observation of what the sim published after `counts` (the counters before a step or
+        reset): in lockstep nothing else is published in between."""
+        self._spin_until(lambda: all(self._counts[key] > counts[key] for key in self._counts), "state of the step")
+        state, cube = self._latest["state"], self._latest["cube"].pose
+        by_name = dict(zip(state.name, zip(state.position, state.velocity)))
+        positions = [by_name[name][0] for name in JOINT_NAMES]
+        velocities = [by_name[name][1] for name in JOINT_NAMES]
+        p, q = cube.position, cube.orientation
+        return np.array([*positions, *velocities, p.x, p.y, p.z, q.w, q.x, q.y, q.z], dtype=np.float32)
+
+    # ------------------------------------------------------------------ gymnasium
+    def reset(self, *, seed: int | None = None, options: dict | None = None):
+        super().reset(seed=seed)
+        if seed is not None or self._process is None:
+            # A seed restarts the sim with it, so the same seed gives the same episodes.
+            self._start_sim(seed if seed is not None else 0)
+        counts = dict(self._counts)
+        self._call(self._reset_client, "/sim/reset")
+        return self._observe(counts), {}
+
+    def step(self, action):
+        action = np.clip(np.asarray(action, dtype=np.float64), LIMITS[:, 0], LIMITS[:, 1])
+        counts = dict(self._counts)
+        self._commands.publish(self._JointState(name=JOINT_NAMES, position=[float(v) for v in action]))
+        time.sleep(0.002)  # the command reaches the sim before the step that must apply it
+        self._call(self._step_client, "/sim/step")
+        observation = self._observe(counts)
+        success = bool(self._latest["success"].data)
+        terminated = success and self._task == "cube_to_bin"
+        return observation, float(self._latest["reward"].data), terminated, False, {"success": success}
+
+    def close(self):
+        import rclpy
+
+        self._stop_sim()
+        if self._context.ok():
+            self._executor.shutdown(timeout_sec=1)
+            self._node.destroy_node()
+            rclpy.try_shutdown(context=self._context)
+        self._log.close()
+
+
+def register_envs() -> None:
+    """Registers the environments (done at import)."""
+    ids = {"so101/CubeToBin-v0": ("cube_to_bin", 600), "so101/TouchCube-v0": ("touch_cube", 300)}
+    for env_id, (task, steps) in ids.items():
+        if env_id not in gym.registry:
+            gym.register(env_id, entry_point="so101_lerobot.gym_env:So101SimEnv", kwargs={"task": task},
+                         max_episode_steps=steps)
+
+
+register_envs()
