@@ -10,7 +10,7 @@ use anyhow::{Context, Result};
 use so101_core::ros::{command_inbox::CommandInbox, shutdown::Shutdown, RosNode};
 
 use crate::{
-    cameras::rig::{CameraRig, Capture, RigOptions},
+    cameras::rig::{CameraRig, RigOptions},
     cli::Args,
     demo::{Script, PICK_AND_PLACE},
     mujoco,
@@ -143,14 +143,9 @@ impl SimLoop {
     fn run(&mut self, shutdown: &Shutdown) {
         // The state at time 0, so subscribers see the arm before the first step. The first frames
         // are waited for in every mode (the renderer's first draw is slow); then the clocks start.
-        if let Some(rig) = &mut self.cameras {
-            let time = self.world.time();
-            if let Capture::Queued(published) =
-                rig.capture_and_wait(self.world.simulation_mut(), time)
-            {
-                wait_until_published(published);
-            }
-            self.pacer.restart(time, Instant::now());
+        if self.cameras.is_some() {
+            wait_until_published(self.capture_every_frame());
+            self.pacer.restart(self.world.time(), Instant::now());
         }
         let deadline = self
             .args
@@ -242,17 +237,10 @@ impl SimLoop {
             );
             // The caller sees the new episode on the topics, its camera frames too, by the time it
             // has the answer (in real time as well: a reset is a break in the episode anyway).
-            let time = self.world.time();
-            let frames = match &mut self.cameras {
-                Some(rig) => match rig.capture_and_wait(self.world.simulation_mut(), time) {
-                    Capture::Queued(published) => published,
-                    Capture::Nothing | Capture::Skipped => None,
-                },
-                None => None,
-            };
+            let frames = self.capture_every_frame();
             self.publish_and_wait(None);
             wait_until_published(frames);
-            self.pacer.restart(time, Instant::now());
+            self.pacer.restart(self.world.time(), Instant::now());
             self.services.answer_reset(call, true, message);
         }
     }
@@ -330,10 +318,17 @@ impl SimLoop {
     fn capture_frames(&mut self, notify: bool) -> Option<std::sync::mpsc::Receiver<()>> {
         let rig = self.cameras.as_mut()?;
         let time = self.world.time();
-        match rig.capture(self.world.simulation_mut(), time, notify) {
-            Capture::Queued(published) => published,
-            Capture::Nothing | Capture::Skipped => None,
-        }
+        rig.capture(self.world.simulation_mut(), time, notify)
+            .published()
+    }
+
+    /// Hands the frames due now (every camera's, after a start or reset) to the renderer, waiting
+    /// for it in every mode; the answer fires once they are published.
+    fn capture_every_frame(&mut self) -> Option<std::sync::mpsc::Receiver<()>> {
+        let rig = self.cameras.as_mut()?;
+        let time = self.world.time();
+        rig.capture_and_wait(self.world.simulation_mut(), time)
+            .published()
     }
 
     fn publish(&mut self, diagnostics: Option<NodeDiagnostics>) {

@@ -113,6 +113,16 @@ pub enum Capture {
     Skipped,
 }
 
+impl Capture {
+    /// What fires once the frames are published, if any were queued with a notice.
+    pub fn published(self) -> Option<Receiver<()>> {
+        match self {
+            Self::Queued(published) => published,
+            Self::Nothing | Self::Skipped => None,
+        }
+    }
+}
+
 impl CameraRig {
     /// Checks the cameras against the model, advertises their topics, and starts the render thread
     /// (which makes the GL context and uploads the model before this returns).
