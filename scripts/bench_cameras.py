@@ -18,13 +18,14 @@ from __future__ import annotations
 
 import argparse
 import json
-import os
 import re
 import signal
 import statistics
 import subprocess
 import sys
 from pathlib import Path
+
+import bench_common
 
 # (label, lite, cameras, size)
 CONFIGS = [
@@ -36,10 +37,7 @@ CONFIGS = [
 
 
 def node_env() -> dict:
-    # The venv's Python carries an LD_LIBRARY_PATH into the ROS wheels; Rust binaries need none.
-    env = {k: v for k, v in os.environ.items() if k != "LD_LIBRARY_PATH"}
-    env["RUST_LOG"] = "info"
-    return env
+    return bench_common.node_env("info")
 
 
 def bare_ms_per_frame(bin_dir: Path, lite: bool, cameras: str, size: str, frames: int) -> float:
@@ -50,20 +48,7 @@ def bare_ms_per_frame(bin_dir: Path, lite: bool, cameras: str, size: str, frames
     return float(json.loads(out.strip().splitlines()[-1])["ms_per_frame"])
 
 
-SUBSCRIBER = """
-import rclpy
-from rclpy.node import Node
-from sensor_msgs.msg import Image
-rclpy.init()
-node = Node('bench_image_subscriber')
-count = [0]
-node.create_subscription(Image, '/camera/top/image_raw', lambda m: count.__setitem__(0, count[0] + 1), 10)
-try:
-    rclpy.spin(node)
-except KeyboardInterrupt:
-    pass
-print(count[0])
-"""
+SUBSCRIBER = bench_common.counting_subscriber("sensor_msgs", "Image", "/camera/top/image_raw", 10)
 
 
 def run_node(bin_dir: Path, args: list[str], seconds: float, with_subscriber: bool = False) -> dict:

@@ -11,18 +11,17 @@ from __future__ import annotations
 
 import argparse
 import json
-import os
 import subprocess
 import sys
 import tempfile
 import time
 from pathlib import Path
 
+import bench_common
+
 
 def node_env() -> dict:
-    env = {k: v for k, v in os.environ.items() if k != "LD_LIBRARY_PATH"}
-    env.setdefault("RUST_LOG", "warn")
-    return env
+    return bench_common.node_env("warn", keep_callers_level=True)
 
 
 def record(bin_dir: Path, bags: Path, episodes: int, size: str) -> float:

@@ -11,19 +11,17 @@ from __future__ import annotations
 
 import argparse
 import json
-import os
 import subprocess
 import sys
 import tempfile
 import time
 from pathlib import Path
 
+import bench_common
+
 
 def node_env() -> dict:
-    # The venv's Python carries an LD_LIBRARY_PATH into the ROS wheels; Rust binaries need none.
-    env = {k: v for k, v in os.environ.items() if k != "LD_LIBRARY_PATH"}
-    env.setdefault("RUST_LOG", "info")
-    return env
+    return bench_common.node_env("info", keep_callers_level=True)
 
 
 def run_expert(bin_dir: Path, episodes: int, speed: float, sim_seed: int, expert_seed: int, noise: tuple[float, float],

@@ -13,7 +13,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import os
 import re
 import signal
 import statistics
@@ -23,15 +22,14 @@ import tempfile
 import time
 from pathlib import Path
 
+import bench_common
+
 REPO = Path(__file__).resolve().parent.parent
 SCENE = REPO / "assets" / "so101_cube_to_bin.xml"
 
 
 def node_env() -> dict:
-    # The venv's Python carries an LD_LIBRARY_PATH into the ROS wheels; Rust binaries need none.
-    env = {k: v for k, v in os.environ.items() if k != "LD_LIBRARY_PATH"}
-    env["RUST_LOG"] = "info"
-    return env
+    return bench_common.node_env("info")
 
 
 def testspeed_steps_per_second(steps: int) -> float:
@@ -64,20 +62,7 @@ def node_steps_per_second(bin_dir: Path, seconds: float, with_subscriber: bool) 
     return float(match.group(1))
 
 
-SUBSCRIBER = """
-import rclpy, signal
-from rclpy.node import Node
-from sensor_msgs.msg import JointState
-rclpy.init()
-node = Node('bench_subscriber')
-count = [0]
-node.create_subscription(JointState, '/joint_states', lambda m: count.__setitem__(0, count[0] + 1), 100)
-try:
-    rclpy.spin(node)
-except KeyboardInterrupt:
-    pass
-print(count[0])
-"""
+SUBSCRIBER = bench_common.counting_subscriber("sensor_msgs", "JointState", "/joint_states", 100)
 
 
 def start_node(bin_dir: Path, rate: float) -> subprocess.Popen:

@@ -1,0 +1,36 @@
+"""What the benchmark scripts share: the environment of the Rust nodes they start, and an rclpy
+subscriber process that counts the messages of one topic."""
+
+from __future__ import annotations
+
+import os
+
+
+def node_env(rust_log: str, keep_callers_level: bool = False) -> dict:
+    """The environment for a Rust node: the venv's Python carries an LD_LIBRARY_PATH into the ROS
+    wheels, which the nodes must not load; RUST_LOG as given (or as the caller set it)."""
+    env = {k: v for k, v in os.environ.items() if k != "LD_LIBRARY_PATH"}
+    if keep_callers_level:
+        env.setdefault("RUST_LOG", rust_log)
+    else:
+        env["RUST_LOG"] = rust_log
+    return env
+
+
+def counting_subscriber(package: str, message: str, topic: str, depth: int) -> str:
+    """Python source of a process that counts `topic` messages until SIGINT, then prints the count
+    (run as `python -c SOURCE`)."""
+    return f"""
+import rclpy
+from rclpy.node import Node
+from {package}.msg import {message}
+rclpy.init()
+node = Node('bench_subscriber')
+count = [0]
+node.create_subscription({message}, '{topic}', lambda m: count.__setitem__(0, count[0] + 1), {depth})
+try:
+    rclpy.spin(node)
+except KeyboardInterrupt:
+    pass
+print(count[0])
+"""
