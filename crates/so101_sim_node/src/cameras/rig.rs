@@ -151,7 +151,7 @@ impl CameraRig {
                 rig.jpeg_quality.is_some(),
             )?);
             cameras.push(Camera {
-                clock: FrameClock::new(spec.rate, start_time),
+                clock: FrameClock::new(spec.rate, start_time, sim.timestep()),
                 spec,
                 model_id,
                 skipped: 0,

@@ -1,9 +1,5 @@
 //! When a camera's next frame is due, in sim time.
 
-/// Sim time tolerance when comparing a control-period end with a frame instant (the clock is
-/// counted in physics steps, but a rate's period is not a whole number of them).
-const EPSILON: f64 = 1e-9;
-
 /// Frames at a fixed rate of sim time: frame k is taken at the first control-period end at or
 /// after `start + k / rate`, so the long-run rate is exact even where a frame period is not a whole
 /// number of control periods (30 Hz on 100 Hz control alternates 3 and 4 periods).
@@ -11,24 +7,30 @@ const EPSILON: f64 = 1e-9;
 pub struct FrameClock {
     period: f64,
     next_due: f64,
+    /// How early a control-period end may be and still count as a frame instant: a period ends at
+    /// the physics step nearest its ideal end, up to half a step before it, so a camera at the
+    /// control rate (30 Hz on 2 ms steps) still gets a frame every period.
+    tolerance: f64,
 }
 
 impl FrameClock {
-    pub fn new(rate: f64, start: f64) -> Self {
+    /// `timestep`: the physics step (s) that control periods are counted in.
+    pub fn new(rate: f64, start: f64, timestep: f64) -> Self {
         Self {
             period: 1.0 / rate,
             next_due: start,
+            tolerance: timestep / 2.0 + 1e-9,
         }
     }
 
     /// Whether a frame is due at `time`; when it is, the next one is scheduled. A clock that has
     /// fallen more than a period behind (a rate above the control rate) restarts from `time`.
     pub fn take_due(&mut self, time: f64) -> bool {
-        if time + EPSILON < self.next_due {
+        if time + self.tolerance < self.next_due {
             return false;
         }
         self.next_due += self.period;
-        if self.next_due + EPSILON <= time {
+        if self.next_due + self.tolerance <= time {
             self.next_due = time + self.period;
         }
         true
@@ -45,7 +47,7 @@ mod tests {
     use super::*;
 
     fn frames(rate: f64, control_rate: f64, seconds: f64) -> Vec<f64> {
-        let mut clock = FrameClock::new(rate, 0.0);
+        let mut clock = FrameClock::new(rate, 0.0, 0.002);
         let periods = (seconds * control_rate).round() as u64;
         (0..=periods)
             .map(|k| k as f64 / control_rate)
@@ -82,12 +84,27 @@ mod tests {
 
     #[test]
     fn restart_makes_a_frame_due_at_once() {
-        let mut clock = FrameClock::new(10.0, 0.0);
+        let mut clock = FrameClock::new(10.0, 0.0, 0.002);
         assert!(clock.take_due(0.0));
         assert!(!clock.take_due(0.05));
         clock.restart(0.05);
         assert!(clock.take_due(0.05));
         assert!(!clock.take_due(0.1));
         assert!(clock.take_due(0.15));
+    }
+
+    #[test]
+    fn a_camera_at_a_control_rate_off_the_physics_grid_gets_a_frame_every_period() {
+        // 30 Hz control on 2 ms physics steps: period k ends at the step nearest k/30 s, which is
+        // up to 1 ms early (k = 2 ends at 66 ms, before 66.7 ms).
+        let timestep = 0.002;
+        let mut clock = FrameClock::new(30.0, 0.0, timestep);
+        let end_of = |k: u64| (k as f64 / 30.0 / timestep).round() * timestep;
+        for k in 0..300 {
+            assert!(
+                clock.take_due(end_of(k)),
+                "no frame at the end of period {k}"
+            );
+        }
     }
 }
