@@ -31,22 +31,10 @@ import sys
 import time
 from pathlib import Path
 
+from so101_lerobot.isolation import network_namespace_problem
+
 REPO_ROOT = Path(__file__).resolve().parents[1]
 JOINT_NAMES = ["shoulder_pan", "shoulder_lift", "elbow_flex", "wrist_flex", "wrist_roll", "gripper"]
-
-
-# --------------------------------------------------------------------------- namespace guard
-def network_namespace_problem() -> str | None:
-    """Why this process must not open a DDS participant here, or None when it may.
-
-    Reads /proc/self/net (per network namespace); /sys/class/net would show the host's
-    interfaces even inside a namespace.
-    """
-    with open("/proc/self/net/dev", encoding="ascii") as f:
-        ifaces = sorted(line.split(":", 1)[0].strip() for line in f.readlines()[2:] if ":" in line)
-    if ifaces != ["lo"]:
-        return f"network interfaces {ifaces}: not a private namespace with only loopback"
-    return None
 
 
 def set_default_environment() -> None:

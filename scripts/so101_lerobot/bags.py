@@ -9,7 +9,7 @@ from pathlib import Path
 import numpy as np
 import yaml
 
-from .units import JOINT_NAMES
+from .messages import joint_positions, rgb_image
 
 
 class BagError(Exception):
@@ -54,14 +54,6 @@ def _stamp(header) -> float:
     return header.stamp.sec + header.stamp.nanosec * 1e-9
 
 
-def _positions(msg) -> np.ndarray | None:
-    """The six positions of a JointState in contract order, or None when it does not name them all."""
-    by_name = dict(zip(msg.name, msg.position))
-    if not all(name in by_name for name in JOINT_NAMES):
-        return None
-    return np.array([by_name[name] for name in JOINT_NAMES], dtype=np.float64)
-
-
 def read_episode(path: Path, cameras: list[str] | None) -> Episode:
     """Everything of one episode the converter uses, in sim time. Raises BagError for an episode
     that was not closed (no metadata.yaml: the recorder was killed), an unreadable file, or one
@@ -94,11 +86,11 @@ def read_episode(path: Path, cameras: list[str] | None) -> Episode:
                     received = message.log_time * 1e-9
                     topic = channel.topic
                     if topic.endswith("/joint_states") and not topic.endswith("leader/joint_states"):
-                        positions = _positions(ros)
+                        positions = joint_positions(ros)
                         if positions is not None:
                             raw_states.append((received, _stamp(ros.header), positions))
                     elif topic.endswith("/joint_commands"):
-                        positions = _positions(ros)
+                        positions = joint_positions(ros)
                         if positions is not None:
                             raw_commands.append((received, positions))
                     elif topic.endswith("/task/reward"):
@@ -109,9 +101,10 @@ def read_episode(path: Path, cameras: list[str] | None) -> Episode:
                         name = topic.rstrip("/").split("/")[-2]
                         if cameras is not None and name not in cameras:
                             continue
-                        if ros.encoding != "rgb8":
-                            raise BagError(f"{path.name}: {topic} is {ros.encoding}, not rgb8")
-                        image = np.frombuffer(bytes(ros.data), dtype=np.uint8).reshape(ros.height, ros.width, 3)
+                        try:
+                            image = rgb_image(ros)
+                        except ValueError as error:
+                            raise BagError(f"{path.name}: {topic}: {error}") from error
                         raw_images.setdefault(name, []).append((_stamp(ros.header), image))
         except BagError:
             raise

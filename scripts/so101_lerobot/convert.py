@@ -91,6 +91,17 @@ def features_for(cameras: dict[str, tuple[int, int]], use_videos: bool) -> dict:
     return features
 
 
+def quiet_video_encoder() -> None:
+    """The AV1 encoder (SVT-AV1) and FFmpeg's muxer print their settings for every video: keep
+    their warnings and errors only, so the progress bar and the summary stay readable."""
+    import os
+
+    os.environ.setdefault("SVT_LOG", "1")  # SVT-AV1: 1 error, 2 warning, 3 info
+    import av.logging
+
+    av.logging.set_level(av.logging.WARNING)
+
+
 def convert(args) -> int:
     from lerobot.datasets.lerobot_dataset import LeRobotDataset
     from tqdm import tqdm
@@ -101,7 +112,7 @@ def convert(args) -> int:
         return 1
     cameras = args.cameras.split(",") if args.cameras else None
     dataset = None
-    converted, skipped, frames_written = 0, [], 0
+    converted, successful, skipped, frames_written = 0, 0, [], 0
     started = time.monotonic()
     for path in tqdm(paths, desc="episodes", unit="episode", disable=args.quiet):
         try:
@@ -144,6 +155,7 @@ def convert(args) -> int:
             dataset.add_frame(frame)
         dataset.save_episode(parallel_encoding=not args.sequential_encoding)
         converted += 1
+        successful += bool(frames.success[-1])  # the verdict of the episode (its last frame)
         frames_written += len(frames.state)
     if dataset is not None:
         dataset.finalize()
@@ -151,7 +163,7 @@ def convert(args) -> int:
             dataset.push_to_hub(private=args.private)
     seconds = time.monotonic() - started
     summary = (
-        f"{converted} episode(s), {frames_written} frames at {args.fps} fps -> {args.output} "
+        f"{converted} episode(s) ({successful} successful), {frames_written} frames at {args.fps} fps -> {args.output} "
         f"({seconds:.1f} s, {frames_written / max(seconds, 1e-9):.0f} frames/s); {len(skipped)} skipped"
     )
     print(summary)
@@ -181,6 +193,7 @@ def main(argv: list[str] | None = None) -> int:
     if args.fps <= 0:
         parser.error("--fps must be positive")
     logging.basicConfig(level=logging.INFO, format="%(levelname)s %(name)s: %(message)s")
+    quiet_video_encoder()
     try:
         return convert(args)
     except BagError as error:

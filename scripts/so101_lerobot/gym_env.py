@@ -6,55 +6,53 @@ starts its own sim node, under a namespace of its own, and talks to it through r
 
 Must run inside the network namespace of scripts/isolated (DDS traffic stays on the machine).
 Observation (float32[19]): joint positions (6, rad), joint velocities (6, rad/s), cube position
-(3, m, world), cube orientation (4, w x y z). Action (float32[6]): joint position targets (rad),
+(3, m, world), cube orientation (4, w x y z). With `cameras={"top": (height, width), ...}` the
+observation is a dict: {"state": that vector, "pixels": {camera: uint8[H, W, 3]}}, each camera
+rendered by the sim at the instant of the state. Action (float32[6]): joint position targets (rad),
 within the joint limits. Reward: /task/reward; terminated: /task/success (cube_to_bin); episodes
 are truncated by the registration's max_episode_steps.
 """
 
 from __future__ import annotations
 
-import hashlib
 import os
 import subprocess
 import tempfile
 import time
-from pathlib import Path
 
 import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
 
-from .units import JOINT_NAMES
+from .messages import joint_positions, rgb_image
+from .paths import node_binary, node_environment
+from .units import JOINT_LIMITS, JOINT_NAMES
 
-LIMITS = np.array([(-1.9199, 1.9199), (-1.7453, 1.7453), (-1.69, 1.69), (-1.6581, 1.6581), (-2.7438, 2.8412), (-0.1745, 1.7453)])
-REPO_ROOT = Path(__file__).resolve().parents[2]
-
-
-def sim_binary() -> Path:
-    """so101_sim_node of this checkout: $SO101_BIN_DIR, else the build directory scripts/common.sh
-    uses ($CARGO_TARGET_DIR, or one per checkout under ~/.cache/so101)."""
-    if os.environ.get("SO101_BIN_DIR"):
-        return Path(os.environ["SO101_BIN_DIR"]) / "so101_sim_node"
-    target = os.environ.get("CARGO_TARGET_DIR") or (
-        Path.home() / ".cache" / "so101" / f"target-{hashlib.sha256(str(REPO_ROOT).encode()).hexdigest()[:12]}"
-    )
-    return Path(target) / "release" / "so101_sim_node"
+LIMITS = JOINT_LIMITS
 
 
 class So101SimEnv(gym.Env):
     metadata = {"render_modes": []}
 
-    def __init__(self, task: str = "cube_to_bin", control_rate: float = 30.0, lite: bool = True, timeout: float = 20.0):
+    def __init__(self, task: str = "cube_to_bin", control_rate: float = 30.0, lite: bool = True, timeout: float = 20.0,
+                 cameras: dict[str, tuple[int, int]] | None = None, dense_reward: bool = False):
         import rclpy
         from geometry_msgs.msg import PoseStamped
         from rclpy.executors import SingleThreadedExecutor
-        from sensor_msgs.msg import JointState
+        from sensor_msgs.msg import Image, JointState
         from std_msgs.msg import Bool, Float64
         from std_srvs.srv import Trigger
 
         self.action_space = spaces.Box(LIMITS[:, 0].astype(np.float32), LIMITS[:, 1].astype(np.float32), dtype=np.float32)
-        self.observation_space = spaces.Box(-np.inf, np.inf, shape=(19,), dtype=np.float32)
+        state_space = spaces.Box(-np.inf, np.inf, shape=(19,), dtype=np.float32)
+        self._cameras = dict(cameras or {})
+        if self._cameras:
+            pixels = {name: spaces.Box(0, 255, shape=(h, w, 3), dtype=np.uint8) for name, (h, w) in self._cameras.items()}
+            self.observation_space = spaces.Dict({"state": state_space, "pixels": spaces.Dict(pixels)})
+        else:
+            self.observation_space = state_space
         self._task, self._rate, self._lite, self._timeout = task, control_rate, lite, timeout
+        self._dense_reward = dense_reward
         self._namespace = f"gym_{os.getpid()}_{id(self) % 100000}"
         self._process: subprocess.Popen | None = None
         self._log = tempfile.NamedTemporaryFile(prefix="so101_gym_sim_", suffix=".log", delete=False)
@@ -66,6 +64,7 @@ class So101SimEnv(gym.Env):
         ns = f"/{self._namespace}"
         self._latest: dict = {}
         self._counts = {"state": 0, "cube": 0, "reward": 0, "success": 0}
+        self._counts.update({f"camera/{name}": 0 for name in self._cameras})
 
         def keep(key):
             def callback(msg):
@@ -78,6 +77,8 @@ class So101SimEnv(gym.Env):
         self._node.create_subscription(PoseStamped, f"{ns}/cube/pose", keep("cube"), 10)
         self._node.create_subscription(Float64, f"{ns}/task/reward", keep("reward"), 10)
         self._node.create_subscription(Bool, f"{ns}/task/success", keep("success"), 10)
+        for name in self._cameras:
+            self._node.create_subscription(Image, f"{ns}/camera/{name}/image_raw", keep(f"camera/{name}"), 10)
         self._commands = self._node.create_publisher(JointState, f"{ns}/joint_commands", 10)
         self._step_client = self._node.create_client(Trigger, f"{ns}/sim/step")
         self._reset_client = self._node.create_client(Trigger, f"{ns}/sim/reset")
@@ -104,15 +105,17 @@ class So101SimEnv(gym.Env):
 
     def _start_sim(self, seed: int) -> None:
         self._stop_sim()
-        binary = sim_binary()
-        if not binary.is_file():
-            raise FileNotFoundError(f"{binary} not found: build the workspace (scripts/setup.sh) or set SO101_BIN_DIR")
+        binary = node_binary("so101_sim_node")
+        cameras = ",".join(f"{name}:{w}x{h}" for name, (h, w) in self._cameras.items()) or "none"
+        # One frame per camera per step: cameras render at the control rate, in lockstep at the
+        # sim-time instant of each step's state.
         command = [str(binary), "--lockstep", "--rate", str(self._rate), "--task", self._task, "--seed", str(seed),
-                   "--cameras", "none", "--namespace", self._namespace]
+                   "--cameras", cameras, "--camera-rate", str(self._rate), "--namespace", self._namespace]
         if self._lite:
             command.append("--lite")
-        env = {k: v for k, v in os.environ.items() if k != "LD_LIBRARY_PATH"}
-        self._process = subprocess.Popen(command, env=env, stdin=subprocess.DEVNULL, stdout=self._log, stderr=self._log)
+        if self._dense_reward:
+            command.append("--dense-reward")
+        self._process = subprocess.Popen(command, env=node_environment(), stdin=subprocess.DEVNULL, stdout=self._log, stderr=self._log)
         self._spin_until(lambda: self._step_client.service_is_ready() and self._reset_client.service_is_ready(), "services")
         self._spin_until(lambda: self._commands.get_subscription_count() > 0, "/joint_commands subscription")
         # Both directions of each service matched, and the start-up state taken in.
@@ -130,16 +133,27 @@ class So101SimEnv(gym.Env):
         self._process = None
         self._latest.clear()
 
-    def _observe(self, counts: dict) -> np.ndarray:
+    def _observe(self, counts: dict):
         """The observation of what the sim published after `counts` (the counters before a step or
         reset): in lockstep nothing else is published in between."""
         self._spin_until(lambda: all(self._counts[key] > counts[key] for key in self._counts), "state of the step")
         state, cube = self._latest["state"], self._latest["cube"].pose
-        by_name = dict(zip(state.name, zip(state.position, state.velocity)))
-        positions = [by_name[name][0] for name in JOINT_NAMES]
-        velocities = [by_name[name][1] for name in JOINT_NAMES]
+        velocity_of = dict(zip(state.name, state.velocity))
+        positions = joint_positions(state)
+        if positions is None:
+            raise RuntimeError(f"/joint_states names {list(state.name)}, not the six joints")
+        velocities = [velocity_of.get(name, 0.0) for name in JOINT_NAMES]
         p, q = cube.position, cube.orientation
-        return np.array([*positions, *velocities, p.x, p.y, p.z, q.w, q.x, q.y, q.z], dtype=np.float32)
+        vector = np.array([*positions, *velocities, p.x, p.y, p.z, q.w, q.x, q.y, q.z], dtype=np.float32)
+        if not self._cameras:
+            return vector
+        pixels = {}
+        for name, (h, w) in self._cameras.items():
+            image = rgb_image(self._latest[f"camera/{name}"])
+            if image.shape != (h, w, 3):
+                raise RuntimeError(f"camera {name}: {image.shape[1]}x{image.shape[0]} frame, expected {w}x{h}")
+            pixels[name] = image
+        return {"state": vector, "pixels": pixels}
 
     # ------------------------------------------------------------------ gymnasium
     def reset(self, *, seed: int | None = None, options: dict | None = None):

@@ -6,13 +6,10 @@ so101_sim_node process wrapper, and an rclpy probe node spinning in a background
 
 from __future__ import annotations
 
-import fcntl
 import math
 import os
 import shlex
 import signal
-import socket
-import struct
 import subprocess
 import sys
 import threading
@@ -59,44 +56,7 @@ DIAGNOSTICS_STATUS_NAME = "so101_sim_node"
 
 
 # =========================================================================== namespace guard
-_SIOCGIFFLAGS = 0x8913
-_IFF_UP = 0x1
-_IFF_MULTICAST = 0x1000
-
-
-def network_namespace_problem() -> str | None:
-    """Why DDS must not be used from this process, or None when it is inside a private network
-    namespace with only loopback, lo up, multicast-capable, and multicast routed on lo.
-
-    Everything is read from the process's own network namespace (/proc/self/net, an ioctl on a
-    socket); /sys/class/net would show the host's interfaces even inside a namespace.
-    """
-    try:
-        with open("/proc/self/net/dev", encoding="ascii") as f:
-            ifaces = sorted(line.split(":", 1)[0].strip() for line in f.readlines()[2:] if ":" in line)
-    except OSError as error:
-        return f"cannot read /proc/self/net/dev ({error})"
-    if ifaces != ["lo"]:
-        return f"this process sees the network interfaces {ifaces}, not only 'lo': it is not inside a private network namespace"
-    try:
-        with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
-            raw = fcntl.ioctl(s.fileno(), _SIOCGIFFLAGS, struct.pack("16sh", b"lo", 0))
-        flags = struct.unpack("16sh", raw[:18])[1]
-    except OSError as error:
-        return f"cannot read the flags of lo ({error})"
-    if not flags & _IFF_UP:
-        return "lo is down in this namespace (ip link set lo up)"
-    if not flags & _IFF_MULTICAST:
-        return "lo has multicast off (ip link set lo multicast on)"
-    try:
-        with open("/proc/self/net/route", encoding="ascii") as f:
-            routes = [line.split() for line in f.readlines()[1:]]
-    except OSError as error:
-        return f"cannot read /proc/self/net/route ({error})"
-    # 224.0.0.0/4 in the little-endian hex of /proc/net/route.
-    if not any(r[0] == "lo" and r[1] == "000000E0" and r[7] == "000000F0" for r in routes if len(r) >= 8):
-        return "no multicast route on lo (ip route add 224.0.0.0/4 dev lo): DDS discovery would fail"
-    return None
+from so101_lerobot.isolation import network_namespace_problem  # noqa: E402,F401 - re-exported for conftest
 
 
 # =========================================================================== the node process

@@ -28,3 +28,24 @@ def test_the_gymnasium_env_passes_the_checker_and_steps_the_sim():
         assert np.linalg.norm(observation[12:15] - cube) < 1e-3, "the cube moved without being touched"
     finally:
         env.close()
+
+
+def test_with_cameras_each_step_brings_the_frames_of_its_state():
+    import gymnasium as gym
+
+    env = gym.make("so101_lerobot.gym_env:so101/TouchCube-v0", cameras={"top": (48, 64), "front": (60, 80)})
+    try:
+        observation, _ = env.reset(seed=2)
+        assert env.observation_space.contains(observation)
+        first = observation["pixels"]["front"].astype(np.int16)
+        assert observation["pixels"]["top"].shape == (48, 64, 3) and first.shape == (60, 80, 3)
+        target = np.array([0.8, -0.6, 0.5, 0.8, 0.0, 1.2], dtype=np.float32)
+        for _ in range(45):
+            observation, *_ = env.step(target)
+        assert env.observation_space.contains(observation)
+        assert np.abs(observation["state"][:6] - target).max() < 0.05
+        # The arm moved in view: the front camera's frame changed.
+        changed = np.abs(observation["pixels"]["front"].astype(np.int16) - first).max(axis=2) > 30
+        assert changed.mean() > 0.01, f"only {changed.mean():.3%} of the front view changed"
+    finally:
+        env.close()

@@ -1,0 +1,58 @@
+#!/usr/bin/env bash
+# The main job: set up, then record episodes of the scripted expert in the simulation (sim node,
+# expert and recorder started together by so101-launch), turn the episode bags into a LeRobot
+# dataset, and print a summary (episodes, successes, frames, where the dataset is).
+#
+#   scripts/record_dataset.sh [--episodes N] [--output DIR] [--seed S] [--lite] [--cameras SPEC]
+#
+# Defaults: 5 episodes, the three cameras at 640x480 and 30 Hz, meshes on, output
+# runs/dataset-<time>/ (bags/, dataset/, logs/). Everything with DDS runs in scripts/isolated.
+set -euo pipefail
+
+. "$(dirname "${BASH_SOURCE[0]}")/common.sh"
+REPO_ROOT="${SO101_ROOT}"
+
+episodes=5
+seed=0
+output="runs/dataset-$(date +%Y%m%d-%H%M%S)"
+sim_args=()
+launch_args=()
+usage() { sed -n '2,10p' "${BASH_SOURCE[0]}" | sed 's/^# \{0,1\}//'; }
+while [ $# -gt 0 ]; do
+    case "$1" in
+        --episodes) episodes="$2"; shift 2 ;;
+        --output) output="$2"; shift 2 ;;
+        --seed) seed="$2"; shift 2 ;;
+        --lite) launch_args+=(--lite); shift ;;
+        --cameras) sim_args+=(--cameras "$2"); shift 2 ;;
+        -h|--help) usage; exit 0 ;;
+        *) echo "record_dataset.sh: unknown argument $1 (--help)" >&2; exit 2 ;;
+    esac
+done
+case "${episodes}" in ''|*[!0-9]*|0) echo "record_dataset.sh: --episodes needs a positive number" >&2; exit 2 ;; esac
+[ ! -e "${output}/dataset" ] || { echo "record_dataset.sh: ${output}/dataset exists already" >&2; exit 2; }
+
+"${REPO_ROOT}/scripts/setup.sh"
+
+VENV_BIN="${REPO_ROOT}/.venv/bin"
+mkdir -p "${output}"
+echo "==> recording ${episodes} expert episode(s) into ${output}/bags"
+"${REPO_ROOT}/scripts/isolated" "${VENV_BIN}/so101-launch" --robot sim --control expert --episodes "${episodes}" \
+    --seed "${seed}" --record --bags "${output}/bags" --log-dir "${output}/logs" \
+    ${launch_args[@]+"${launch_args[@]}"} --sim-args "${sim_args[*]+${sim_args[*]}}"
+
+echo "==> converting to a LeRobot dataset"
+"${VENV_BIN}/so101-bag-to-lerobot" "${output}/bags" --output "${output}/dataset" --repo-id local/so101_cube_to_bin \
+    | tee "${output}/convert.txt"
+
+dataset="$(cd "${output}/dataset" && pwd)"
+cat <<SUMMARY
+
+Summary: $(grep -m1 'episode(s)' "${output}/convert.txt")
+  dataset:  ${dataset} (repo id local/so101_cube_to_bin, LeRobot v3.0)
+  bags:     ${output}/bags     logs: ${output}/logs
+Next: train a policy on it, then run it on the sim:
+  .venv/bin/lerobot-train --dataset.repo_id=local/so101_cube_to_bin --dataset.root=${dataset} \\
+      --policy.type=act --policy.push_to_hub=false --output_dir=outputs/act_so101
+  scripts/isolated .venv/bin/so101-run-policy outputs/act_so101/checkpoints/last/pretrained_model --eval 10
+SUMMARY

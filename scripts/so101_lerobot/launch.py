@@ -1,0 +1,335 @@
+"""so101-launch: start the stack's nodes together by profile and stop them cleanly.
+
+  robot:    sim (so101_sim_node) or real (so101_feetech_driver on --port; --emulate puts the
+            servo-bus emulator behind it, for a try without an arm)
+  control:  teleop (teleop_node: keyboard, gamepad or leader arm), expert (the scripted expert,
+            --episodes N), policy (so101-run-policy with --policy), or none
+  --record: recorder_node, one bag per episode into --bags (the expert and the keyboard mark the
+            episodes; with a policy, one episode from start to stop)
+
+Nodes start in order (robot, recorder, control), each once the one before is on the ROS graph.
+The run ends when the control ends by itself (the expert's last episode, the policy's --duration,
+q in the keyboard teleop), at Ctrl-C or SIGTERM, or when a node dies; then the nodes are stopped in
+reverse order with SIGINT (the recorder closes its bag, the driver turns torque off), and
+killed only if they do not exit within --stop-timeout. Each node's log goes to --log-dir.
+
+DDS stays on this machine: outside a private network namespace the launcher re-runs itself in
+scripts/isolated (--host-network opts out, to reach ROS 2 tools on other hosts).
+
+Examples:
+  so101-launch --control expert --episodes 10 --record --bags bags/
+  so101-launch --robot real --port /dev/ttyACM0 --robot-id my_arm --control policy --policy outputs/.../pretrained_model
+  so101-launch --control teleop --teleop-source gamepad --record
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import shlex
+import signal
+import subprocess
+import sys
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from .isolation import network_namespace_problem
+from .paths import ISOLATED, node_binary, node_environment
+
+
+@dataclass
+class NodeSpec:
+    """One process of the launch: its name (log file), command line, and what shows it is up."""
+
+    name: str
+    argv: list[str]
+    ready: str = ""  # a graph condition, see Launch.wait_ready
+    terminal: bool = False  # keeps the launcher's terminal (keyboard teleop)
+    ends_run: bool = False  # its own exit ends the run
+    open_stdin: bool = False  # reads commands from stdin and ends at its EOF (the emulator)
+
+
+@dataclass
+class Running:
+    spec: NodeSpec
+    process: subprocess.Popen
+    log: Path
+    stopped_by_us: bool = False
+
+
+def plan(args) -> list[NodeSpec]:
+    """The processes of a profile, in start order."""
+    specs: list[NodeSpec] = []
+    ns = ["--namespace", args.namespace] if args.namespace else []
+    if args.robot == "sim":
+        sim = [str(node_binary("so101_sim_node")), "--seed", str(args.seed), *ns]
+        if args.lite:
+            sim.append("--lite")
+        if args.speed:
+            sim += ["--speed", args.speed]
+        sim += shlex.split(args.sim_args)
+        specs.append(NodeSpec("so101_sim_node", sim, ready="publisher /joint_states"))
+    else:
+        port = args.port
+        if args.emulate:
+            port = port or str(Path(args.log_dir) / "servo_bus")
+            specs.append(NodeSpec("so101_servo_emulator", [str(node_binary("so101_servo_emulator")), "--link", port],
+                                  ready=f"path {port}", open_stdin=True))
+        if not port:
+            raise SystemExit("so101-launch: --robot real needs --port (or --emulate)")
+        driver = [str(node_binary("so101_feetech_driver")), "--port", port, *ns]
+        if args.robot_id:
+            driver += ["--robot-id", args.robot_id]
+        if args.calibration:
+            driver += ["--calibration", args.calibration]
+        driver += shlex.split(args.driver_args)
+        specs.append(NodeSpec("so101_feetech_driver", driver, ready="publisher /joint_states"))
+        if args.control == "teleop" and args.teleop_source == "leader":
+            if not args.leader_port:
+                raise SystemExit("so101-launch: a leader arm on the real robot needs --leader-port")
+            leader = [str(node_binary("so101_feetech_driver")), "--port", args.leader_port, "--leader", *ns]
+            if args.leader_id:
+                leader += ["--robot-id", args.leader_id]
+            specs.append(NodeSpec("leader_arm", leader, ready="publisher /leader/joint_states"))
+
+    if args.record:
+        recorder = [str(node_binary("recorder_node")), "--output", args.bags, "--task", args.task, *ns]
+        if args.control == "policy":
+            recorder.append("--start")  # no one marks episodes: one from start to stop
+        recorder += shlex.split(args.recorder_args)
+        specs.append(NodeSpec("recorder_node", recorder, ready="subscriber /episode/events"))
+
+    if args.control in ("teleop", "expert"):
+        teleop = [str(node_binary("teleop_node")), *ns]
+        if args.control == "expert":
+            if args.robot != "sim":
+                raise SystemExit("so101-launch: the scripted expert needs the sim (it reads /cube/pose)")
+            teleop += ["--source", "expert", "--sim-time", "--seed", str(args.seed), "--task", args.task]
+            if args.episodes:
+                teleop += ["--episodes", str(args.episodes)]
+        else:
+            teleop += ["--source", args.teleop_source, "--mode", args.mode]
+        teleop += shlex.split(args.teleop_args)
+        specs.append(NodeSpec("teleop_node", teleop, terminal=args.control == "teleop" and args.teleop_source == "keyboard",
+                              ends_run=True))
+    elif args.control == "policy":
+        if not args.policy:
+            raise SystemExit("so101-launch: --control policy needs --policy (a checkpoint directory or a Hub id)")
+        runner = [str(Path(sys.executable).parent / "so101-run-policy"), args.policy, *ns, "--quiet"]
+        runner += shlex.split(args.policy_args)
+        specs.append(NodeSpec("so101-run-policy", runner, ends_run=True))
+    return specs
+
+
+class Launch:
+    def __init__(self, log_dir: Path, ready_timeout: float, stop_timeout: float, namespace: str):
+        self.log_dir = log_dir
+        self.ready_timeout, self.stop_timeout = ready_timeout, stop_timeout
+        self.prefix = "/" + namespace.strip("/") if namespace.strip("/") else ""
+        self.running: list[Running] = []
+        self._graph = None
+
+    # ------------------------------------------------------------------ readiness
+    def _graph_node(self):
+        if self._graph is None:
+            import rclpy
+
+            rclpy.init()
+            self._graph = rclpy.create_node("so101_launch", start_parameter_services=False)
+        return self._graph
+
+    def wait_ready(self, entry: Running) -> None:
+        """Blocks until the node shows on the graph ("publisher TOPIC" / "subscriber TOPIC") or its
+        file exists ("path P"); SystemExit when it dies or takes longer than the ready timeout."""
+        kind, _, what = entry.spec.ready.partition(" ")
+        deadline = time.monotonic() + self.ready_timeout
+        while True:
+            if entry.process.poll() is not None:
+                raise SystemExit(f"so101-launch: {entry.spec.name} exited with {entry.process.returncode} while starting\n"
+                                 + tail(entry.log))
+            if kind == "path":
+                up = Path(what).exists()
+            elif kind in ("publisher", "subscriber"):
+                graph = self._graph_node()
+                topic = self.prefix + what
+                count = graph.count_publishers(topic) if kind == "publisher" else graph.count_subscribers(topic)
+                up = count > 0
+            else:
+                up = True
+            if up:
+                return
+            if time.monotonic() > deadline:
+                raise SystemExit(f"so101-launch: {entry.spec.name} not up within {self.ready_timeout:.0f} s "
+                                 f"({entry.spec.ready})\n" + tail(entry.log))
+            time.sleep(0.1)
+
+    # ------------------------------------------------------------------ processes
+    def start(self, spec: NodeSpec) -> Running:
+        log = self.log_dir / f"{spec.name}.log"
+        with open(log, "wb") as out:
+            # Every node in a session of its own, so a Ctrl-C at the terminal reaches the launcher
+            # only and the nodes stop in order; the keyboard teleop keeps the terminal (raw mode
+            # turns Ctrl-C into a key it handles itself).
+            stdin = None if spec.terminal else subprocess.PIPE if spec.open_stdin else subprocess.DEVNULL
+            process = subprocess.Popen(
+                spec.argv, env=node_environment(), stdin=stdin,
+                stdout=None if spec.terminal else out, stderr=out, start_new_session=not spec.terminal)
+        entry = Running(spec, process, log)
+        self.running.append(entry)
+        print(f"so101-launch: started {spec.name} (pid {process.pid}, log {log})", flush=True)
+        if spec.ready:
+            self.wait_ready(entry)
+        return entry
+
+    def stop_all(self) -> None:
+        """SIGINT to each node in reverse start order, each given stop_timeout to exit, then SIGKILL."""
+        for entry in reversed(self.running):
+            if entry.process.poll() is not None:
+                continue
+            entry.stopped_by_us = True
+            entry.process.send_signal(signal.SIGINT)
+            try:
+                entry.process.wait(timeout=self.stop_timeout)
+            except subprocess.TimeoutExpired:
+                print(f"so101-launch: {entry.spec.name} did not stop within {self.stop_timeout:.0f} s: killed", flush=True)
+                entry.process.kill()
+                entry.process.wait()
+        if self._graph is not None:
+            import rclpy
+
+            self._graph.destroy_node()
+            rclpy.try_shutdown()
+            self._graph = None
+
+    def watch(self, bags: Path | None) -> Running | None:
+        """Until a node exits; returns it (None when none is left). Meanwhile reports each episode
+        the recorder closes in `bags`."""
+        reported: set[Path] = set()
+        while self.running:
+            if bags is not None:
+                report_closed_episodes(bags, reported)
+            for entry in self.running:
+                if entry.process.poll() is not None:
+                    if bags is not None:
+                        report_closed_episodes(bags, reported)
+                    return entry
+            time.sleep(0.2)
+        return None
+
+
+def report_closed_episodes(bags: Path, reported: set[Path]) -> None:
+    """Prints the episodes newly closed in `bags` (metadata.yaml written), with their verdict."""
+    import yaml
+
+    for metadata in sorted(bags.glob("episode_*/metadata.yaml")):
+        if metadata in reported:
+            continue
+        reported.add(metadata)
+        try:
+            custom = yaml.safe_load(metadata.read_text())["rosbag2_bagfile_information"].get("custom_data") or {}
+        except Exception:  # noqa: BLE001 - a file being written is reported without its verdict
+            custom = {}
+        verdict = {"true": "success", "false": "failure"}.get(str(custom.get("success", "")).lower(), "no verdict")
+        print(f"so101-launch: recorded {metadata.parent.name} ({verdict})", flush=True)
+
+
+def stop_like_ctrl_c(_signum, _frame) -> None:
+    """SIGTERM (a service manager, kill) stops the run as Ctrl-C does."""
+    raise KeyboardInterrupt
+
+
+def tail(log: Path, lines: int = 15) -> str:
+    try:
+        text = log.read_text(errors="replace").splitlines()[-lines:]
+    except OSError:
+        return ""
+    return "\n".join(f"    {line}" for line in text)
+
+
+def parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(prog="so101-launch", description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("--robot", choices=["sim", "real"], default="sim", help="the arm: simulation or the physical driver")
+    p.add_argument("--control", choices=["teleop", "expert", "policy", "none"], default="teleop", help="who moves the arm")
+    p.add_argument("--record", action="store_true", help="record episode bags with recorder_node")
+    p.add_argument("--namespace", default="", help="put every node under /NAMESPACE/")
+    p.add_argument("--seed", type=int, default=0, help="sim and expert seed")
+    p.add_argument("--task", default="put the cube in the bin", help="task text of the recorded episodes")
+    p.add_argument("--log-dir", default=None, help="node logs (default logs/launch-<time>/)")
+    p.add_argument("--ready-timeout", type=float, default=30.0, help="seconds a node may take to come up")
+    p.add_argument("--stop-timeout", type=float, default=15.0, help="seconds a node may take to stop before it is killed")
+    p.add_argument("--host-network", action="store_true", help="do not isolate DDS in a private network namespace")
+    sim = p.add_argument_group("sim")
+    sim.add_argument("--lite", action="store_true", help="no meshes (renders ~5x faster on a CPU)")
+    sim.add_argument("--speed", default=None, help="sim speed (default: real time; 4 with the expert)")
+    sim.add_argument("--sim-args", default="", help="more so101_sim_node flags in one string (--sim-args=\"--cameras top,wrist\")")
+    real = p.add_argument_group("real")
+    real.add_argument("--port", default=None, help="the arm's servo bus, e.g. /dev/ttyACM0")
+    real.add_argument("--robot-id", default=None, help="the arm's LeRobot calibration id")
+    real.add_argument("--calibration", default=None, help="a LeRobot calibration file instead of --robot-id's")
+    real.add_argument("--emulate", action="store_true", help="run so101_servo_emulator as the arm (no hardware)")
+    real.add_argument("--leader-port", default=None, help="the leader arm's bus (--teleop-source leader)")
+    real.add_argument("--leader-id", default=None, help="the leader arm's calibration id")
+    real.add_argument("--driver-args", default="", help="more so101_feetech_driver flags")
+    control = p.add_argument_group("control")
+    control.add_argument("--teleop-source", choices=["keyboard", "gamepad", "leader"], default="keyboard")
+    control.add_argument("--mode", choices=["joint", "cartesian"], default="joint", help="teleop space")
+    control.add_argument("--episodes", type=int, default=0, help="expert: stop after N episodes (0: until Ctrl-C)")
+    control.add_argument("--teleop-args", default="", help="more teleop_node flags")
+    control.add_argument("--policy", default=None, help="policy checkpoint directory or Hub id (--control policy)")
+    control.add_argument("--policy-args", default="", help="more so101-run-policy flags, e.g. \"--duration 60\"")
+    record = p.add_argument_group("recording")
+    record.add_argument("--bags", default="bags", help="directory of the episode bags")
+    record.add_argument("--recorder-args", default="", help="more recorder_node flags")
+    return p
+
+
+def main(argv: list[str] | None = None) -> int:
+    argv = sys.argv[1:] if argv is None else argv
+    args = parser().parse_args(argv)
+    if not args.host_network and network_namespace_problem():
+        # Re-run inside a private network namespace; every node inherits it.
+        os.execv(str(ISOLATED), [str(ISOLATED), sys.executable, "-m", "so101_lerobot.launch", *argv])
+    if args.speed is None and args.robot == "sim" and args.control == "expert":
+        args.speed = "4"  # every camera frame rendered; as fast as the renderer allows, up to 4x
+    args.log_dir = args.log_dir or f"logs/launch-{time.strftime('%Y%m%d-%H%M%S')}"
+    log_dir = Path(args.log_dir)
+    log_dir.mkdir(parents=True, exist_ok=True)
+    try:
+        specs = plan(args)
+    except FileNotFoundError as error:
+        raise SystemExit(f"so101-launch: {error}") from error
+
+    launch = Launch(log_dir, args.ready_timeout, args.stop_timeout, args.namespace)
+    signal.signal(signal.SIGTERM, stop_like_ctrl_c)
+    status = 0
+    try:
+        for spec in specs:
+            launch.start(spec)
+        print("so101-launch: all nodes up (Ctrl-C stops them)", flush=True)
+        ended = launch.watch(Path(args.bags) if args.record else None)
+        if ended is not None:
+            code = ended.process.returncode
+            if ended.spec.ends_run and code == 0:
+                print(f"so101-launch: {ended.spec.name} finished", flush=True)
+            else:
+                status = 1
+                print(f"so101-launch: {ended.spec.name} exited with {code}\n{tail(ended.log)}", flush=True)
+    except KeyboardInterrupt:
+        print("so101-launch: stopping", flush=True)
+    except SystemExit as error:
+        print(error, file=sys.stderr, flush=True)
+        status = 1
+    finally:
+        launch.stop_all()
+    for entry in launch.running:
+        code = entry.process.returncode
+        if entry.stopped_by_us and code not in (0, -signal.SIGINT):
+            print(f"so101-launch: {entry.spec.name} stopped with {code} (log {entry.log})", flush=True)
+            status = 1
+    print(f"so101-launch: stopped; logs in {log_dir}", flush=True)
+    return status
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,117 @@
+"""A LeRobot policy (a local checkpoint or a Hub id) behind the stack's units: joint positions in
+radians and RGB frames in, joint targets in radians out. The policy's own pre- and post-processors
+(normalization, device) run as lerobot-train saved them; this module only maps the stack's values
+onto the policy's features and back."""
+
+from __future__ import annotations
+
+import logging
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from .units import lerobot_from_radians, radians_from_lerobot
+
+STATE = "observation.state"
+IMAGE_PREFIX = "observation.images."
+log = logging.getLogger(__name__)
+
+
+class PolicyError(Exception):
+    """A policy this stack cannot drive the arm with, and why."""
+
+
+@dataclass(frozen=True)
+class CameraInput:
+    """One camera the policy looks at: its name (observation.images.<name>) and frame size."""
+
+    name: str
+    height: int
+    width: int
+
+
+def pick_device(requested: str | None) -> str:
+    """The torch device: the requested one, else CUDA when there is one, else the CPU."""
+    import torch
+
+    if requested:
+        return requested
+    return "cuda" if torch.cuda.is_available() else "cpu"
+
+
+class StackPolicy:
+    """Loads the policy and runs one inference per control period (select_action: chunking
+    policies such as ACT answer from their action queue in between)."""
+
+    def __init__(self, source: str, units: str = "lerobot", device: str | None = None, task: str = ""):
+        from lerobot.configs import FeatureType, PreTrainedConfig
+        from lerobot.policies.factory import get_policy_class, make_pre_post_processors
+
+        if units not in ("lerobot", "radians"):
+            raise PolicyError(f"units {units!r}: lerobot or radians")
+        self.units, self.task, self.device = units, task, pick_device(device)
+        try:
+            config = PreTrainedConfig.from_pretrained(source)
+        except Exception as error:  # noqa: BLE001 - a missing file and a bad Hub id read the same to a user
+            raise PolicyError(f"cannot load a LeRobot policy config from {source!r} ({type(error).__name__}: {error})") from error
+        config.pretrained_path = Path(source) if Path(source).exists() else source
+        config.device = self.device
+        self.policy = get_policy_class(config.type).from_pretrained(source, config=config)
+        self.policy.eval()
+        overrides = {"device_processor": {"device": self.device}}
+        self.preprocessor, self.postprocessor = make_pre_post_processors(
+            config, pretrained_path=source, preprocessor_overrides=overrides)
+        self.config = config
+
+        inputs = config.input_features
+        if STATE not in inputs or tuple(inputs[STATE].shape) != (6,):
+            raise PolicyError(f"the policy's {STATE} is {inputs.get(STATE)}, not the six joint positions")
+        action = config.output_features.get("action")
+        if action is None or tuple(action.shape) != (6,):
+            raise PolicyError(f"the policy's action is {action}, not six joint targets")
+        self.cameras = [
+            CameraInput(key.removeprefix(IMAGE_PREFIX), int(feature.shape[1]), int(feature.shape[2]))
+            for key, feature in inputs.items() if feature.type is FeatureType.VISUAL
+        ]
+        others = [key for key, feature in inputs.items() if key != STATE and feature.type is not FeatureType.VISUAL]
+        if others:
+            raise PolicyError(f"the policy needs inputs the stack does not provide: {others}")
+        log.info("policy %s (%s) on %s, cameras %s", source, config.type, self.device,
+                 ", ".join(f"{c.name} {c.width}x{c.height}" for c in self.cameras) or "none")
+
+    def reset(self) -> None:
+        """Before each episode: clears the policy's action queue and observation history."""
+        self.policy.reset()
+        self.preprocessor.reset()
+        self.postprocessor.reset()
+
+    def observation(self, positions: np.ndarray, images: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
+        """The policy's observation from joint positions (rad, contract order) and HxWx3 uint8
+        frames by camera name; frames of another size are resized to the policy's."""
+        state = lerobot_from_radians(positions) if self.units == "lerobot" else np.asarray(positions, dtype=np.float64)
+        observation = {STATE: state.astype(np.float32)}
+        for camera in self.cameras:
+            frame = images[camera.name]
+            if frame.shape[:2] != (camera.height, camera.width):
+                frame = resize(frame, camera.height, camera.width)
+            observation[IMAGE_PREFIX + camera.name] = frame
+        return observation
+
+    def act(self, observation: dict[str, np.ndarray]) -> np.ndarray:
+        """Joint targets (rad, contract order) for the observation."""
+        import torch
+        from lerobot.common.control_utils import predict_action
+
+        action = predict_action(observation, self.policy, torch.device(self.device), self.preprocessor,
+                                self.postprocessor, use_amp=False, task=self.task, robot_type="so_follower")
+        values = action.squeeze(0).to("cpu").numpy().astype(np.float64)
+        if values.shape != (6,) or not np.all(np.isfinite(values)):
+            raise PolicyError(f"the policy answered {values}, not six finite joint targets")
+        return radians_from_lerobot(values) if self.units == "lerobot" else values
+
+
+def resize(frame: np.ndarray, height: int, width: int) -> np.ndarray:
+    from PIL import Image
+
+    return np.asarray(Image.fromarray(frame).resize((width, height), Image.BILINEAR))

@@ -1,0 +1,266 @@
+"""so101-run-policy: drive the arm with a LeRobot policy (a local checkpoint such as
+outputs/train/.../checkpoints/last/pretrained_model, or a Hub id) through rclpy.
+
+Live (default): observations from /joint_states and /camera/<name>/image_raw (the cameras the
+policy was trained with), one inference per period, /joint_commands at --fps. The same against
+so101_sim_node and so101_feetech_driver: both speak the same topics. When an input goes stale
+(older than --max-age) no command is sent, so the arm holds (the driver's watchdog, the sim's
+last target) until it is fresh again.
+
+Evaluation (--eval N): N seeded episodes on a sim of its own in lockstep (physics waits for the
+policy), success rate, mean and best reward, an MP4 per episode and eval_info.json in --output.
+
+Run it inside scripts/isolated with the arm's node (evaluation starts its own sim).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import logging
+import sys
+import time
+from dataclasses import asdict, dataclass
+from pathlib import Path
+
+import numpy as np
+
+from .messages import joint_positions, rgb_image
+from .policy import PolicyError, StackPolicy
+from .units import JOINT_LIMITS, JOINT_NAMES
+
+DEFAULT_TASK = "put the cube in the bin"
+log = logging.getLogger("so101-run-policy")
+
+
+# =========================================================================== live
+class LiveInputs:
+    """The newest /joint_states and camera frames, with the wall time each arrived."""
+
+    def __init__(self, node, prefix: str, cameras: dict[str, str]):
+        from rclpy.qos import qos_profile_sensor_data
+        from sensor_msgs.msg import Image, JointState
+
+        self.state: tuple[float, object] | None = None
+        self.frames: dict[str, tuple[float, object]] = {}
+        # Best effort matches reliable and best-effort writers; only the newest message matters.
+        node.create_subscription(JointState, f"{prefix}/joint_states", self._on_state, qos_profile_sensor_data)
+        for name, topic in cameras.items():
+            node.create_subscription(Image, topic, lambda msg, name=name: self._on_frame(name, msg), qos_profile_sensor_data)
+
+    def _on_state(self, msg) -> None:
+        if joint_positions(msg) is not None:
+            self.state = (time.monotonic(), msg)
+
+    def _on_frame(self, name: str, msg) -> None:
+        self.frames[name] = (time.monotonic(), msg)
+
+    def stale(self, cameras: list[str], max_age: float) -> list[str]:
+        """The inputs missing or older than max_age seconds."""
+        now = time.monotonic()
+        inputs = {"/joint_states": self.state, **{f"camera {name}": self.frames.get(name) for name in cameras}}
+        return [what for what, entry in inputs.items() if entry is None or now - entry[0] > max_age]
+
+
+def run_live(args, policy: StackPolicy) -> int:
+    import rclpy
+    from sensor_msgs.msg import JointState
+    from std_srvs.srv import Trigger
+
+    prefix = "/" + args.namespace.strip("/") if args.namespace.strip("/") else ""
+    topics = {camera.name: f"{prefix}/camera/{camera.name}/image_raw" for camera in policy.cameras}
+    topics.update(dict(item.split("=", 1) for item in args.camera))
+    rclpy.init()
+    node = rclpy.create_node("so101_policy_runner")
+    inputs = LiveInputs(node, prefix, topics)
+    commands = node.create_publisher(JointState, f"{prefix}/joint_commands", 10)
+    camera_names = [camera.name for camera in policy.cameras]
+    period = 1.0 / args.fps
+    steps = late = held = 0
+    inference: list[float] = []
+    try:
+        if args.reset:
+            client = node.create_client(Trigger, f"{prefix}/sim/reset")
+            if not client.wait_for_service(timeout_sec=20.0):
+                raise SystemExit(f"so101-run-policy: no {prefix}/sim/reset service within 20 s")
+            future = client.call_async(Trigger.Request())
+            rclpy.spin_until_future_complete(node, future, timeout_sec=10.0)
+        deadline = time.monotonic() + args.startup_timeout
+        while missing := inputs.stale(camera_names, args.max_age):
+            if time.monotonic() > deadline:
+                raise SystemExit(f"so101-run-policy: nothing from {', '.join(missing)} within {args.startup_timeout:.0f} s "
+                                 "(is the arm's node running, with these cameras?)")
+            rclpy.spin_once(node, timeout_sec=0.05)
+        # One inference before the clock starts: the first one (allocation, kernels) is slow.
+        policy.act(policy.observation(joint_positions(inputs.state[1]),
+                                      {name: rgb_image(inputs.frames[name][1]) for name in camera_names}))
+        policy.reset()
+        log.info("running at %.1f Hz%s", args.fps, f" for {args.duration:.0f} s" if args.duration else " until Ctrl-C")
+        begun = time.monotonic()
+        tick = begun
+        while not args.duration or tick - begun < args.duration:
+            missing = inputs.stale(camera_names, args.max_age)
+            if missing:
+                held += 1
+                if held == 1 or held % int(args.fps * 5) == 0:
+                    log.warning("holding the arm: %s stale (> %.2f s)", ", ".join(missing), args.max_age)
+            else:
+                started = time.monotonic()
+                positions = joint_positions(inputs.state[1])
+                images = {name: rgb_image(inputs.frames[name][1]) for name in camera_names}
+                # The arm's node clamps too; never send past the model's limits from here either.
+                target = np.clip(policy.act(policy.observation(positions, images)), JOINT_LIMITS[:, 0], JOINT_LIMITS[:, 1])
+                inference.append(time.monotonic() - started)
+                msg = JointState(name=JOINT_NAMES, position=[float(v) for v in target])
+                msg.header.stamp = node.get_clock().now().to_msg()
+                commands.publish(msg)
+                steps += 1
+            tick += period
+            if time.monotonic() > tick:
+                late += 1
+                tick = time.monotonic()  # never burst to catch up
+            while (wait := tick - time.monotonic()) > 0:
+                rclpy.spin_once(node, timeout_sec=wait)
+    except KeyboardInterrupt:
+        pass
+    finally:
+        node.destroy_node()
+        rclpy.try_shutdown()
+    mean_ms = 1000 * float(np.mean(inference)) if inference else 0.0
+    print(f"{steps} commands at {args.fps:.0f} Hz, inference {mean_ms:.1f} ms mean, {late} late periods, {held} held")
+    return 0
+
+
+# =========================================================================== evaluation
+@dataclass
+class EpisodeResult:
+    seed: int
+    success: bool
+    sum_reward: float
+    max_reward: float
+    steps: int
+    video: str | None
+
+
+def tile(frames: dict[str, np.ndarray]) -> np.ndarray:
+    """Frames side by side (each padded at the bottom to the tallest), for one video."""
+    height = max(frame.shape[0] for frame in frames.values())
+    return np.concatenate([np.pad(f, ((0, height - f.shape[0]), (0, 0), (0, 0))) for f in frames.values()], axis=1)
+
+
+def evaluate(args, policy: StackPolicy) -> int:
+    from lerobot.utils.io_utils import write_video
+    from tqdm import tqdm
+
+    from .gym_env import So101SimEnv
+
+    cameras = {camera.name: (camera.height, camera.width) for camera in policy.cameras}
+    video_cameras = list(cameras)
+    if args.video_camera and args.video_camera not in cameras:
+        cameras[args.video_camera] = (240, 320)
+    if args.video_camera:
+        video_cameras = [args.video_camera]
+    output = Path(args.output)
+    (output / "videos").mkdir(parents=True, exist_ok=True)
+    max_steps = int(round(args.episode_time * args.fps))
+    env = So101SimEnv(task=args.sim_task, control_rate=args.fps, lite=args.lite, cameras=cameras or None,
+                      dense_reward=args.reward == "dense")
+    results: list[EpisodeResult] = []
+    try:
+        for index in tqdm(range(args.eval), desc="episodes", unit="ep", disable=args.quiet):
+            seed = args.seed + index
+            observation, _ = env.reset(seed=seed)
+            policy.reset()
+            rewards: list[float] = []
+            video: list[np.ndarray] = []
+            success = False
+            for _ in range(max_steps):
+                state = observation["state"] if cameras else observation
+                pixels = observation["pixels"] if cameras else {}
+                if video_cameras:
+                    video.append(tile({name: pixels[name] for name in video_cameras}))
+                target = policy.act(policy.observation(state[:6].astype(np.float64), pixels))
+                observation, reward, terminated, _, info = env.step(target)
+                rewards.append(reward)
+                if info["success"]:
+                    success = True
+                if terminated:
+                    break
+            path = None
+            if video:
+                path = output / "videos" / f"episode_{index:03d}_seed{seed}.mp4"
+                write_video(path, video, fps=int(round(args.fps)))
+            results.append(EpisodeResult(seed, success, float(np.sum(rewards)), float(np.max(rewards)), len(rewards),
+                                         str(path) if path else None))
+    finally:
+        env.close()
+
+    sums = [r.sum_reward for r in results]
+    summary = {
+        "policy": args.policy,
+        "episodes": len(results),
+        "pc_success": 100.0 * sum(r.success for r in results) / len(results),
+        "avg_sum_reward": float(np.mean(sums)),
+        "best_sum_reward": float(np.max(sums)),
+        "avg_max_reward": float(np.mean([r.max_reward for r in results])),
+        "reward": args.reward,
+        "fps": args.fps,
+        "episode_time_s": args.episode_time,
+    }
+    (output / "eval_info.json").write_text(json.dumps({"aggregated": summary, "per_episode": [asdict(r) for r in results]}, indent=2))
+    for r in results:
+        print(f"seed {r.seed:>4}: {'success' if r.success else 'failure'} after {r.steps} steps, "
+              f"reward sum {r.sum_reward:.2f} (max {r.max_reward:.2f})")
+    print(f"{len(results)} episode(s): success {summary['pc_success']:.0f} %, mean reward {summary['avg_sum_reward']:.2f}, "
+          f"best {summary['best_sum_reward']:.2f}; videos and eval_info.json in {output}")
+    return 0
+
+
+# =========================================================================== entry point
+def parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(prog="so101-run-policy", description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("policy", help="a LeRobot policy: a pretrained_model directory or a Hugging Face Hub id")
+    p.add_argument("--fps", type=float, default=30.0, help="control rate: the fps of the policy's training dataset")
+    p.add_argument("--units", choices=["lerobot", "radians"], default="lerobot",
+                   help="joint units the policy was trained in (so101-bag-to-lerobot's default is lerobot)")
+    p.add_argument("--task", default=DEFAULT_TASK, help="task text for language-conditioned policies")
+    p.add_argument("--device", default=None, help="torch device (default: cuda when available, else cpu)")
+    p.add_argument("--quiet", action="store_true", help="no progress bar")
+    live = p.add_argument_group("live")
+    live.add_argument("--namespace", default="", help="the arm's namespace (topics under /NAMESPACE/)")
+    live.add_argument("--camera", action="append", default=[], metavar="NAME=TOPIC",
+                      help="take the policy's camera NAME from TOPIC (default /camera/NAME/image_raw)")
+    live.add_argument("--duration", type=float, default=0.0, help="stop after this many seconds (0: at Ctrl-C)")
+    live.add_argument("--max-age", type=float, default=0.5, help="inputs older than this (s) hold the arm")
+    live.add_argument("--startup-timeout", type=float, default=30.0, help="seconds to wait for the first inputs")
+    live.add_argument("--reset", action="store_true", help="call /sim/reset first (simulation)")
+    ev = p.add_argument_group("evaluation (own sim in lockstep)")
+    ev.add_argument("--eval", type=int, default=0, metavar="N", help="evaluate over N seeded episodes instead")
+    ev.add_argument("--seed", type=int, default=0, help="seed of the first episode (then seed+1, ...)")
+    ev.add_argument("--episode-time", type=float, default=20.0, help="sim seconds before an episode counts as failed")
+    ev.add_argument("--sim-task", default="cube_to_bin", choices=["cube_to_bin", "touch_cube"], help="the sim's task")
+    ev.add_argument("--reward", choices=["dense", "sparse"], default="dense",
+                    help="the sim's reward: dense shows how close a failed episode came (cube_to_bin)")
+    ev.add_argument("--lite", action="store_true", help="sim without meshes (faster to render on a CPU)")
+    ev.add_argument("--video-camera", default=None, help="film this camera (320x240) instead of the policy's cameras")
+    ev.add_argument("--output", default="eval", help="directory for eval_info.json and videos/")
+    return p
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = parser().parse_args(argv)
+    logging.basicConfig(level=logging.INFO, format="%(levelname)s %(name)s: %(message)s")
+    for item in args.camera:
+        if "=" not in item:
+            raise SystemExit(f"so101-run-policy: --camera {item!r}: expected NAME=TOPIC")
+    if args.fps <= 0:
+        raise SystemExit("so101-run-policy: --fps must be positive")
+    try:
+        policy = StackPolicy(args.policy, units=args.units, device=args.device, task=args.task)
+    except PolicyError as error:
+        raise SystemExit(f"so101-run-policy: {error}") from error
+    return evaluate(args, policy) if args.eval > 0 else run_live(args, policy)
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,87 @@
+"""so101-launch: the sim profile with the expert and the recorder records its episodes and ends by
+itself; the real profile (driver on the servo-bus emulator) with recording comes up on the graph
+and stops cleanly in order on SIGTERM (the recorder's bag closed, the driver's torque off, no
+process left behind)."""
+
+from __future__ import annotations
+
+import os
+import re
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import yaml
+
+from driver_harness import write_calibration
+from harness import best_effort_qos
+
+LAUNCH = Path(sys.executable).parent / "so101-launch"
+
+
+def started_pids(output: str) -> dict[str, int]:
+    return {name: int(pid) for name, pid in re.findall(r"started (\S+) \(pid (\d+)", output)}
+
+
+def gone(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return True
+    # A zombie not yet reaped by its parent (the launcher, which has exited) counts as gone too.
+    return Path(f"/proc/{pid}/stat").read_text().split()[2] == "Z"
+
+
+def test_sim_expert_recording_profile_records_its_episodes_and_ends(tmp_path):
+    bags, logs = tmp_path / "bags", tmp_path / "logs"
+    done = subprocess.run([str(LAUNCH), "--control", "expert", "--episodes", "2", "--record", "--bags", str(bags),
+                           "--lite", "--sim-args", "--cameras none", "--seed", "4", "--log-dir", str(logs)],
+                          capture_output=True, text=True, timeout=180)
+    assert done.returncode == 0, done.stdout + done.stderr
+    pids = started_pids(done.stdout)
+    assert list(pids) == ["so101_sim_node", "recorder_node", "teleop_node"], done.stdout
+    assert "teleop_node finished" in done.stdout
+    assert "recorded episode_000000 (success)" in done.stdout and "recorded episode_000001 (success)" in done.stdout, done.stdout
+    episodes = sorted(bags.glob("episode_*"))
+    assert len(episodes) == 2, episodes
+    for episode in episodes:
+        custom = yaml.safe_load((episode / "metadata.yaml").read_text())["rosbag2_bagfile_information"]["custom_data"]
+        assert custom["success"] == "true" and custom["task"] == "put the cube in the bin", custom
+    assert {p.name for p in logs.iterdir()} == {"so101_sim_node.log", "recorder_node.log", "teleop_node.log"}
+    assert all(gone(pid) for pid in pids.values()), "a node outlived the launcher"
+
+
+def test_real_profile_on_the_emulator_stops_cleanly_on_sigterm(ros, tmp_path):
+    from sensor_msgs.msg import JointState
+
+    calibration = write_calibration(tmp_path / "calibration.json")
+    bags, logs = tmp_path / "bags", tmp_path / "logs"
+    states = ros.subscribe("/joint_states", JointState, best_effort_qos())
+    launcher = subprocess.Popen(
+        [str(LAUNCH), "--robot", "real", "--emulate", "--calibration", str(calibration), "--control", "none",
+         "--record", "--bags", str(bags), "--recorder-args=--start", "--log-dir", str(logs)],
+        stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    output = ""
+    try:
+        deadline = time.monotonic() + 60
+        while "all nodes up" not in output:
+            line = launcher.stdout.readline()
+            assert line or launcher.poll() is None, f"the launcher exited early:\n{output}"
+            output += line
+            assert time.monotonic() < deadline, f"not up within 60 s:\n{output}"
+        states.wait_count(50, 10.0)  # the driver reads the (emulated) arm
+        time.sleep(1.0)
+        launcher.send_signal(signal.SIGTERM)
+        rest, _ = launcher.communicate(timeout=60)
+        output += rest
+    finally:
+        if launcher.poll() is None:
+            launcher.kill()
+    assert launcher.returncode == 0, output
+    pids = started_pids(output)
+    assert list(pids) == ["so101_servo_emulator", "so101_feetech_driver", "recorder_node"], output
+    assert all(gone(pid) for pid in pids.values()), "a node outlived the launcher"
+    assert (bags / "episode_000000" / "metadata.yaml").is_file(), "the recorder did not close its episode"
+    assert "torque off" in (logs / "so101_feetech_driver.log").read_text(), "the driver did not turn torque off"

@@ -1,0 +1,124 @@
+"""The loop back from LeRobot: a tiny ACT policy, built from its config and trained for a few steps
+on the CPU by lerobot-train on a dataset converted from expert bags, runs through
+so101-run-policy: an evaluation episode on its own sim in lockstep (eval_info.json, an MP4 that
+PyAV decodes frame for frame) and live against a running sim (commands at the policy's fps, inside
+the joint limits); a bad policy and a missing camera are reported, not fatal to the arm."""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+
+from harness import best_effort_qos, wait_until
+
+JOINTS = ["shoulder_pan", "shoulder_lift", "elbow_flex", "wrist_flex", "wrist_roll", "gripper"]
+LIMITS = [(-1.9199, 1.9199), (-1.7453, 1.7453), (-1.69, 1.69), (-1.6581, 1.6581), (-2.7438, 2.8412), (-0.1745, 1.7453)]
+VENV_BIN = Path(sys.executable).parent
+CAMERAS = "top:64x48,wrist:64x48"
+
+
+def run(argv: list[str], timeout: float, **kwargs) -> subprocess.CompletedProcess:
+    env = {**os.environ, "HF_HUB_OFFLINE": "1", "WANDB_MODE": "disabled"}
+    return subprocess.run([str(a) for a in argv], capture_output=True, text=True, timeout=timeout, env=env, **kwargs)
+
+
+def train_tiny_act(dataset: Path, output: Path) -> Path:
+    """lerobot-train, as a user runs it: ACT shrunk to a few thousand transformer weights, no
+    pretrained backbone (nothing downloaded), 3 steps on the CPU."""
+    done = run([VENV_BIN / "lerobot-train", "--dataset.repo_id=local/so101_policy_test", f"--dataset.root={dataset}",
+                "--policy.type=act", "--policy.device=cpu", "--policy.push_to_hub=false",
+                "--policy.pretrained_backbone_weights=null", "--policy.dim_model=32", "--policy.n_heads=2",
+                "--policy.dim_feedforward=64", "--policy.n_encoder_layers=1", "--policy.n_decoder_layers=1",
+                "--policy.n_vae_encoder_layers=1", "--policy.chunk_size=10", "--policy.n_action_steps=10",
+                "--steps=3", "--batch_size=4", "--num_workers=0", "--save_freq=3", "--log_freq=1",
+                "--wandb.enable=false", f"--output_dir={output}"], timeout=300)
+    assert done.returncode == 0, done.stdout[-3000:] + done.stderr[-3000:]
+    checkpoint = output / "checkpoints" / "last" / "pretrained_model"
+    assert (checkpoint / "model.safetensors").is_file() and (checkpoint / "policy_preprocessor.json").is_file()
+    return checkpoint
+
+
+def test_a_tiny_act_trained_on_a_converted_dataset_runs_through_the_runner(sim_factory, recorder_factory, teleop_factory, arm_factory,
+                                                                           ros, tmp_path):
+    # Demonstrations: one expert episode, recorded and converted.
+    sim = sim_factory("--speed", "2", "--seed", "5", "--cameras", CAMERAS)
+    recorder = recorder_factory()
+    wait_until(lambda: ros.node.count_subscribers("/episode/events") >= 1, 20.0, "the recorder", sim)
+    teleop = teleop_factory("--source", "expert", "--sim-time", "--episodes", "1", "--seed", "5")
+    wait_until(lambda: not teleop.alive(), 90.0, "the expert's episode", sim)
+    wait_until(lambda: (recorder.output / "episode_000000" / "metadata.yaml").is_file(), 20.0, "the closed episode", sim)
+    dataset = tmp_path / "dataset"
+    done = run([VENV_BIN / "so101-bag-to-lerobot", recorder.output, "--output", dataset,
+                "--repo-id", "local/so101_policy_test", "--quiet"], timeout=300)
+    assert done.returncode == 0 and "1 episode(s) (1 successful)" in done.stdout, done.stdout + done.stderr
+
+    checkpoint = train_tiny_act(dataset, tmp_path / "train")
+
+    # Evaluation: one seeded episode of 2 s on the runner's own sim in lockstep.
+    evaluation = tmp_path / "eval"
+    done = run([VENV_BIN / "so101-run-policy", checkpoint, "--eval", "1", "--seed", "7", "--episode-time", "2",
+                "--lite", "--output", evaluation, "--quiet"], timeout=300)
+    assert done.returncode == 0, done.stdout[-3000:] + done.stderr[-3000:]
+    info = json.loads((evaluation / "eval_info.json").read_text())
+    assert info["aggregated"]["episodes"] == 1 and info["aggregated"]["pc_success"] in (0.0, 100.0)
+    episode = info["per_episode"][0]
+    assert episode["seed"] == 7 and episode["steps"] == 60, episode  # 2 s at 30 fps, unless it succeeded: it cannot
+    assert math.isfinite(episode["sum_reward"]) and episode["max_reward"] >= 0.0
+    assert "1 episode(s): success" in done.stdout, done.stdout
+
+    import av
+
+    with av.open(episode["video"]) as container:
+        frames = [frame.to_ndarray(format="rgb24") for frame in container.decode(video=0)]
+    assert len(frames) == 60, f"{len(frames)} video frames for 60 steps"
+    assert frames[0].shape == (48, 128, 3), "the video is not the policy's two 64x48 cameras side by side"
+    assert frames[0].std() > 5, "a blank video"
+
+    # Live: against a sim running in real time, under a namespace of its own.
+    from sensor_msgs.msg import JointState
+
+    live = sim_factory("--cameras", CAMERAS, "--namespace", "live")
+    commands = ros.subscribe("/live/joint_commands", JointState, best_effort_qos(1000))
+    done = run([VENV_BIN / "so101-run-policy", checkpoint, "--namespace", "live", "--duration", "3", "--reset"], timeout=120)
+    assert done.returncode == 0, done.stdout[-3000:] + done.stderr[-3000:]
+    live.assert_alive()
+    received = commands.messages()
+    assert 60 <= len(received) <= 95, f"{len(received)} commands in 3 s at 30 Hz"
+    for msg in received:
+        assert list(msg.name) == JOINTS and len(msg.position) == 6
+        assert all(np.isfinite(msg.position)), msg.position
+    positions = np.array([msg.position for msg in received])
+    low, high = np.array(LIMITS).T
+    assert np.all(positions >= low - 1e-9) and np.all(positions <= high + 1e-9), "a command outside the joint limits"
+
+    # Unchanged against the physical arm's driver (on the servo-bus emulator), the cameras taken
+    # from the sim's topics: the arm follows the policy.
+    arm, _emulator = arm_factory()
+    states = ros.subscribe("/joint_states", JointState, best_effort_qos())
+    first = states.next_message(20.0, arm)
+    before = np.array([dict(zip(first.name, first.position))[j] for j in JOINTS])
+    done = run([VENV_BIN / "so101-run-policy", checkpoint, "--duration", "3",
+                "--camera", "top=/live/camera/top/image_raw", "--camera", "wrist=/live/camera/wrist/image_raw"], timeout=120)
+    assert done.returncode == 0, done.stdout[-3000:] + done.stderr[-3000:]
+    arm.assert_alive()
+    after = np.array([dict(zip(states.latest().name, states.latest().position))[j] for j in JOINTS])
+    assert np.abs(after - before).max() > 0.05, f"the driven arm did not move: {before} -> {after}"
+
+    # A missing camera: the runner says which and exits; the sim is unharmed.
+    partial = sim_factory("--cameras", "top:64x48", "--namespace", "partial")
+    done = run([VENV_BIN / "so101-run-policy", checkpoint, "--namespace", "partial", "--duration", "1",
+                "--startup-timeout", "3"], timeout=60)
+    assert done.returncode != 0 and "camera wrist" in done.stderr, done.stdout + done.stderr
+    partial.assert_alive()
+
+
+def test_the_runner_reports_a_policy_it_cannot_load(tmp_path):
+    done = run([VENV_BIN / "so101-run-policy", tmp_path / "no_such_policy", "--duration", "1"], timeout=120)
+    assert done.returncode != 0
+    assert "cannot load a LeRobot policy" in done.stderr and "Traceback" not in done.stderr, done.stderr[-2000:]
