@@ -17,7 +17,7 @@ APT_PACKAGES=(libmujoco-dev libmujoco-samples libclang-dev gcc libc6-dev iproute
               libudev-dev pkg-config
               libegl1 libegl-mesa0 libgl1-mesa-dri libosmesa6
               libavutil57 libavcodec59 libavformat59 libavdevice59 libavfilter8 libswscale6 libswresample4)
-MIN_RUST=1.87.0
+MIN_RUST=1.95.0
 
 log() { printf '\033[1msetup:\033[0m %s\n' "$*" >&2; }
 die() { printf 'setup: ERROR: %s\n' "$*" >&2; exit 1; }

@@ -68,3 +68,47 @@ crate::ros_message!(
     "std_msgs/Header header\nPose pose\n",
     deps: [Header, Pose]
 );
+
+/// geometry_msgs/Vector3
+#[derive(Debug, Clone, Copy, Default, PartialEq, Serialize, Deserialize)]
+pub struct Vector3 {
+    pub x: f64,
+    pub y: f64,
+    pub z: f64,
+}
+crate::ros_message!(
+    Vector3,
+    "geometry_msgs",
+    "Vector3",
+    "float64 x\nfloat64 y\nfloat64 z\n"
+);
+
+/// geometry_msgs/Transform
+#[derive(Debug, Clone, Copy, Default, PartialEq, Serialize, Deserialize)]
+pub struct Transform {
+    pub translation: Vector3,
+    pub rotation: Quaternion,
+}
+crate::ros_message!(
+    Transform,
+    "geometry_msgs",
+    "Transform",
+    "Vector3 translation\nQuaternion rotation\n",
+    deps: [Vector3, Quaternion]
+);
+
+/// geometry_msgs/TransformStamped: `transform` is the pose of `child_frame_id` in
+/// `header.frame_id`.
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+pub struct TransformStamped {
+    pub header: Header,
+    pub child_frame_id: String,
+    pub transform: Transform,
+}
+crate::ros_message!(
+    TransformStamped,
+    "geometry_msgs",
+    "TransformStamped",
+    "std_msgs/Header header\nstring child_frame_id\nTransform transform\n",
+    deps: [Header, Transform]
+);

@@ -13,6 +13,7 @@ pub mod rosgraph_msgs;
 pub mod sensor_msgs;
 pub mod std_msgs;
 pub mod std_srvs;
+pub mod tf2_msgs;
 mod type_info;
 
 pub use type_info::{RosMessage, RosService, TypeInfo};

@@ -6,6 +6,9 @@
             --episodes N), policy (so101-run-policy with --policy), or none
   --record: recorder_node, one bag per episode into --bags (the expert and the keyboard mark the
             episodes; with a policy, one episode from start to stop)
+  --tf:     so101_state_publisher (/robot_description and /tf, for RViz)
+  --rerun:  so101_rerun live into a viewer it starts (spawn), a running one (connect[=URL]) or a
+            FILE.rrd
 
 Nodes start in order (robot, recorder, control), each once the one before is on the ROS graph.
 The run ends when the control ends by itself (the expert's last episode, the policy's --duration,
@@ -92,6 +95,19 @@ def plan(args) -> list[NodeSpec]:
             if args.leader_id:
                 leader += ["--robot-id", args.leader_id]
             specs.append(NodeSpec("leader_arm", leader, ready="publisher /leader/joint_states"))
+
+    if args.tf:
+        specs.append(NodeSpec("so101_state_publisher", [str(node_binary("so101_state_publisher")), *ns],
+                              ready="publisher /robot_description"))
+    if args.rerun:
+        sink = args.rerun
+        if sink == "spawn":
+            sink_args = ["--spawn"]
+        elif sink == "connect" or sink.startswith("connect="):
+            sink_args = ["--connect", *([sink.split("=", 1)[1]] if "=" in sink else [])]
+        else:
+            sink_args = ["--save", sink]
+        specs.append(NodeSpec("so101_rerun", [str(node_binary("so101_rerun")), "live", *sink_args, *ns]))
 
     if args.record:
         recorder = [str(node_binary("recorder_node")), "--output", args.bags, "--task", args.task, *ns]
@@ -278,6 +294,10 @@ def parser() -> argparse.ArgumentParser:
     control.add_argument("--teleop-args", default="", help="more teleop_node flags")
     control.add_argument("--policy", default=None, help="policy checkpoint directory or Hub id (--control policy)")
     control.add_argument("--policy-args", default="", help="more so101-run-policy flags, e.g. \"--duration 60\"")
+    viz = p.add_argument_group("visualization")
+    viz.add_argument("--tf", action="store_true", help="publish /robot_description and /tf (so101_state_publisher)")
+    viz.add_argument("--rerun", default=None, metavar="SINK",
+                     help="show the run in Rerun: spawn (a viewer), connect[=URL] (a running one) or FILE.rrd")
     record = p.add_argument_group("recording")
     record.add_argument("--bags", default="bags", help="directory of the episode bags")
     record.add_argument("--recorder-args", default="", help="more recorder_node flags")

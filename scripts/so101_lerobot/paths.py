@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import hashlib
 import os
+import sys
 from pathlib import Path
 
 REPO_ROOT = Path(__file__).resolve().parents[2]
@@ -32,5 +33,9 @@ def node_binary(name: str) -> Path:
 
 def node_environment() -> dict[str, str]:
     """The environment for a Rust node started from the venv's Python: without the ROS wheels'
-    LD_LIBRARY_PATH additions, which the nodes do not need."""
-    return {k: v for k, v in os.environ.items() if k != "LD_LIBRARY_PATH"}
+    LD_LIBRARY_PATH additions, which the nodes do not need; the venv's executables (the Rerun
+    viewer `rerun` that so101_rerun --spawn starts) on PATH."""
+    env = {k: v for k, v in os.environ.items() if k != "LD_LIBRARY_PATH"}
+    venv_bin = str(Path(sys.executable).parent)
+    env["PATH"] = os.pathsep.join([venv_bin, *(p for p in env.get("PATH", "").split(os.pathsep) if p and p != venv_bin)])
+    return env

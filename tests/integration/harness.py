@@ -439,3 +439,55 @@ def latest_diagnostics_values(array_msgs) -> dict[str, str] | None:
         if values is not None:
             return values
     return None
+
+
+# =========================================================================== an independent FK
+SCENE = REPO_ROOT / "assets" / "so101_cube_to_bin.xml"
+ARM_BODIES = ["base", "shoulder", "upper_arm", "lower_arm", "wrist", "gripper", "moving_jaw"]
+
+
+def _quaternion_matrix(w: float, x: float, y: float, z: float):
+    import numpy as np
+
+    n = math.sqrt(w * w + x * x + y * y + z * z)
+    w, x, y, z = w / n, x / n, y / n, z / n
+    return np.array([
+        [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
+        [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
+        [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)],
+    ])
+
+
+def scene_body_poses(joints: dict[str, float]) -> dict[str, tuple]:
+    """World pose (rotation 3x3, position) of each arm body of the scene file for the given joint
+    positions, walking the MJCF body tree (each body: pos, quat, then its hinge about local z),
+    independently of the Rust kinematic model. Also "gripper_tip": the grasp point site."""
+    import xml.etree.ElementTree as ElementTree
+
+    import numpy as np
+
+    root = ElementTree.parse(SCENE).getroot()
+    body = root.find("./worldbody")
+    rotation, position = np.eye(3), np.zeros(3)
+    poses = {}
+    for name in ARM_BODIES:
+        body = next(b for b in body.iter("body") if b.get("name") == name)
+        offset = np.array([float(v) for v in body.get("pos", "0 0 0").split()])
+        quat = [float(v) for v in body.get("quat", "1 0 0 0").split()]
+        position = position + rotation @ offset
+        rotation = rotation @ _quaternion_matrix(*quat)
+        joint = body.find("joint")
+        if joint is not None:
+            angle = joints[joint.get("name")]
+            c, s = math.cos(angle), math.sin(angle)
+            rotation = rotation @ np.array([[c, -s, 0], [s, c, 0], [0, 0, 1]])
+        poses[name] = (rotation, position)
+        if name == "gripper":
+            site = next(s for s in body.iter("site") if s.get("name") == "gripper_tip")
+            poses["gripper_tip"] = (rotation, position + rotation @ np.array([float(v) for v in site.get("pos").split()]))
+    return poses
+
+
+def grasp_point(joints: dict[str, float]):
+    """World position of the scene's gripper_tip site (the grasp point)."""
+    return scene_body_poses(joints)["gripper_tip"][1]

@@ -35,13 +35,14 @@ def gone(pid: int) -> bool:
 
 
 def test_sim_expert_recording_profile_records_its_episodes_and_ends(tmp_path):
-    bags, logs = tmp_path / "bags", tmp_path / "logs"
+    bags, logs, rrd = tmp_path / "bags", tmp_path / "logs", tmp_path / "run.rrd"
     done = subprocess.run([str(LAUNCH), "--control", "expert", "--episodes", "2", "--record", "--bags", str(bags),
-                           "--lite", "--sim-args", "--cameras none", "--seed", "4", "--log-dir", str(logs)],
+                           "--lite", "--sim-args", "--cameras none", "--seed", "4", "--log-dir", str(logs),
+                           "--tf", "--rerun", str(rrd)],
                           capture_output=True, text=True, timeout=180)
     assert done.returncode == 0, done.stdout + done.stderr
     pids = started_pids(done.stdout)
-    assert list(pids) == ["so101_sim_node", "recorder_node", "teleop_node"], done.stdout
+    assert list(pids) == ["so101_sim_node", "so101_state_publisher", "so101_rerun", "recorder_node", "teleop_node"], done.stdout
     assert "teleop_node finished" in done.stdout
     assert "recorded episode_000000 (success)" in done.stdout and "recorded episode_000001 (success)" in done.stdout, done.stdout
     episodes = sorted(bags.glob("episode_*"))
@@ -49,7 +50,12 @@ def test_sim_expert_recording_profile_records_its_episodes_and_ends(tmp_path):
     for episode in episodes:
         custom = yaml.safe_load((episode / "metadata.yaml").read_text())["rosbag2_bagfile_information"]["custom_data"]
         assert custom["success"] == "true" and custom["task"] == "put the cube in the bin", custom
-    assert {p.name for p in logs.iterdir()} == {"so101_sim_node.log", "recorder_node.log", "teleop_node.log"}
+    assert {p.name for p in logs.iterdir()} == {f"{name}.log" for name in pids}
+    # The Rerun bridge saw the expert's episodes: the arm moved in its recording.
+    from rerun.experimental import RrdReader
+
+    entities = {str(chunk.entity_path) for chunk in RrdReader(str(rrd)).stream().to_chunks()}
+    assert {"/world/base/shoulder", "/joints/gripper/command", "/task/success"} <= entities, sorted(entities)
     assert all(gone(pid) for pid in pids.values()), "a node outlived the launcher"
 
 

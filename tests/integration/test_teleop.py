@@ -12,7 +12,6 @@ import pty
 import select
 import subprocess
 import time
-import xml.etree.ElementTree as ElementTree
 from pathlib import Path
 
 import numpy as np
@@ -24,6 +23,7 @@ from harness import (
     LIMIT_TOLERANCE,
     REPO_ROOT,
     best_effort_qos,
+    grasp_point,
     node_binary,
     node_environment,
     positions_by_name,
@@ -31,42 +31,6 @@ from harness import (
     start_and_wait,
     wait_until,
 )
-
-SCENE = REPO_ROOT / "assets" / "so101_cube_to_bin.xml"
-ARM_LINKS = ["base", "shoulder", "upper_arm", "lower_arm", "wrist", "gripper"]
-
-
-# =========================================================================== an independent FK
-def _quaternion_matrix(w: float, x: float, y: float, z: float) -> np.ndarray:
-    n = math.sqrt(w * w + x * x + y * y + z * z)
-    w, x, y, z = w / n, x / n, y / n, z / n
-    return np.array([
-        [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
-        [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
-        [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)],
-    ])
-
-
-def grasp_point(joints: dict[str, float]) -> np.ndarray:
-    """World position of the scene's gripper_tip site for the given joint positions, walking the
-    MJCF body chain (each body: pos, quat, then its hinge about local z)."""
-    root = ElementTree.parse(SCENE).getroot()
-    body = root.find("./worldbody")
-    rotation, position = np.eye(3), np.zeros(3)
-    for name in ARM_LINKS:
-        body = next(b for b in body.iter("body") if b.get("name") == name)
-        offset = np.array([float(v) for v in body.get("pos", "0 0 0").split()])
-        quat = [float(v) for v in body.get("quat", "1 0 0 0").split()]
-        position = position + rotation @ offset
-        rotation = rotation @ _quaternion_matrix(*quat)
-        joint = body.find("joint")
-        if joint is not None:
-            angle = joints[joint.get("name")]
-            c, s = math.cos(angle), math.sin(angle)
-            rotation = rotation @ np.array([[c, -s, 0], [s, c, 0], [0, 0, 1]])
-    site = next(s for s in body.iter("site") if s.get("name") == "gripper_tip")
-    return position + rotation @ np.array([float(v) for v in site.get("pos").split()])
-
 
 def write_script(path: Path, lines: list[dict]) -> Path:
     path.write_text("".join(json.dumps(line) + "\n" for line in lines))

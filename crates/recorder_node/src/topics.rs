@@ -5,7 +5,7 @@
 use regex::Regex;
 use so101_msgs::{
     builtin_interfaces, diagnostic_msgs, geometry_msgs, rosgraph_msgs, sensor_msgs, std_msgs,
-    RosMessage, TypeInfo,
+    tf2_msgs, RosMessage, TypeInfo,
 };
 
 /// Topics recorded by default (relative to the namespace; regular expressions, whole-name match):
@@ -39,6 +39,10 @@ pub fn known_types() -> Vec<&'static TypeInfo> {
         sensor_msgs::CameraInfo::INFO,
         geometry_msgs::Pose::INFO,
         geometry_msgs::PoseStamped::INFO,
+        geometry_msgs::Vector3::INFO,
+        geometry_msgs::Transform::INFO,
+        geometry_msgs::TransformStamped::INFO,
+        tf2_msgs::TFMessage::INFO,
         rosgraph_msgs::Clock::INFO,
         diagnostic_msgs::DiagnosticArray::INFO,
     ]

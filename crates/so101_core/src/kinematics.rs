@@ -14,7 +14,7 @@
 
 use nalgebra::{Isometry3, Matrix5, Translation3, UnitQuaternion, Vector3, Vector5};
 
-use crate::robot::{JointLimit, JOINT_LIMITS};
+use crate::robot::{JointLimit, JOINT_COUNT, JOINT_LIMITS};
 
 /// Joints that move the grasp point: shoulder_pan .. wrist_roll.
 pub const ARM_JOINTS: usize = 5;
@@ -54,10 +54,40 @@ const CHAIN: [LinkOffset; ARM_JOINTS] = [
     },
 ];
 
+/// The moving jaw in the gripper frame (it turns about its own z axis by the gripper joint). The
+/// scene's rounded numbers, as for `CHAIN`.
+#[allow(clippy::approx_constant)]
+const MOVING_JAW: LinkOffset = LinkOffset {
+    translation: [0.0202, 0.0188, -0.0234],
+    rotation: [0.707107, 0.707107, 0.0, 0.0],
+};
+
+/// The links the six joints move, in contract order (the scene's body names); `BASE_LINK` is the
+/// first joint's parent.
+pub const LINK_NAMES: [&str; JOINT_COUNT] = [
+    "shoulder",
+    "upper_arm",
+    "lower_arm",
+    "wrist",
+    "gripper",
+    "moving_jaw",
+];
+pub const BASE_LINK: &str = "base";
+/// The parent link of each joint: the chain's previous link, except the moving jaw, which hangs
+/// off the gripper like the wrist roll's link.
+pub const PARENT_LINKS: [&str; JOINT_COUNT] = [
+    BASE_LINK,
+    "shoulder",
+    "upper_arm",
+    "lower_arm",
+    "wrist",
+    "gripper",
+];
+
 /// The grasp point (the scene's `gripper_tip` site: the centre of a 3 cm cube held between the
 /// jaw pads) in the gripper frame. The fingers point along the gripper frame's -z and the jaws
 /// open along its x.
-const GRASP_POINT: [f64; 3] = [0.007, -0.0002, -0.092];
+pub const GRASP_POINT: [f64; 3] = [0.007, -0.0002, -0.092];
 
 /// Where the sim scene puts the arm's base in its world frame.
 pub const SIM_BASE_IN_WORLD: [f64; 3] = [0.0, 0.0, 0.75];
@@ -70,13 +100,23 @@ fn offset(link: &LinkOffset) -> Isometry3<f64> {
     )
 }
 
+/// Where joint `index`'s link sits in its parent link (`PARENT_LINKS`) at angle 0; every joint
+/// turns its link about that link's own z axis.
+pub fn joint_origin(index: usize) -> Isometry3<f64> {
+    offset(CHAIN.get(index).unwrap_or(&MOVING_JAW))
+}
+
+/// Joint `index`'s link in its parent link at `angle` (rad).
+pub fn joint_transform(index: usize, angle: f64) -> Isometry3<f64> {
+    let turn = UnitQuaternion::from_axis_angle(&Vector3::z_axis(), angle);
+    joint_origin(index) * Isometry3::from_parts(Translation3::identity(), turn)
+}
+
 /// The frame of every arm link (shoulder, upper_arm, lower_arm, wrist, gripper) in the base frame.
 pub fn link_frames(joints: &ArmPositions) -> [Isometry3<f64>; ARM_JOINTS] {
     let mut frame = Isometry3::identity();
     std::array::from_fn(|index| {
-        let turn = UnitQuaternion::from_axis_angle(&Vector3::z_axis(), joints[index]);
-        frame =
-            frame * offset(&CHAIN[index]) * Isometry3::from_parts(Translation3::identity(), turn);
+        frame *= joint_transform(index, joints[index]);
         frame
     })
 }

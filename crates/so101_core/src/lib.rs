@@ -2,6 +2,7 @@
 //! logic), and the ROS 2 plumbing (context from the environment, QoS presets, names under a
 //! namespace, sim clock, shutdown, logging mirrored to /rosout).
 
+pub mod cli_values;
 pub mod command;
 pub mod kinematics;
 pub mod robot;

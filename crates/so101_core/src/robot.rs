@@ -6,6 +6,13 @@
 /// Number of actuated joints (5 arm joints + gripper).
 pub const JOINT_COUNT: usize = 6;
 
+/// The project's MJCF scene (the arm, the table, the bin, the cube, the cameras) in this checkout:
+/// the sim loads it, and the robot description is drawn from it.
+pub const DEFAULT_SCENE: &str = concat!(
+    env!("CARGO_MANIFEST_DIR"),
+    "/../../assets/so101_cube_to_bin.xml"
+);
+
 /// Joint names in the order of every array in the topic contract.
 pub const JOINT_NAMES: [&str; JOINT_COUNT] = [
     "shoulder_pan",

@@ -77,10 +77,7 @@ pub struct Args {
 }
 
 pub fn default_scene() -> &'static str {
-    concat!(
-        env!("CARGO_MANIFEST_DIR"),
-        "/../../assets/so101_cube_to_bin.xml"
-    )
+    so101_core::robot::DEFAULT_SCENE
 }
 
 fn parse_rate(text: &str) -> Result<f64, String> {

@@ -83,10 +83,10 @@ pub struct Args {
     #[arg(long)]
     pub no_reset: bool,
     /// Expert: the arm's base in the world frame of /cube/pose (the sim scene's by default), m.
-    #[arg(long, default_value = "0,0,0.75", value_parser = parse_point)]
+    #[arg(long, default_value = "0,0,0.75", value_parser = so101_core::cli_values::parse_point)]
     pub base_xyz: [f64; 3],
     /// Expert: where to drop the cube (world frame; the sim scene's bin centre by default), m.
-    #[arg(long, default_value = "0.10,-0.22,0.77", value_parser = parse_point)]
+    #[arg(long, default_value = "0.10,-0.22,0.77", value_parser = so101_core::cli_values::parse_point)]
     pub bin_xyz: [f64; 3],
     /// Task text of the episodes (the recorder's metadata, LeRobot's task).
     #[arg(long, default_value = "put the cube in the bin")]
@@ -122,21 +122,6 @@ fn parse_noise(text: &str) -> Result<f64, String> {
         Ok(value) if (0.0..=0.5).contains(&value) => Ok(value),
         _ => Err(format!(
             "{text:?} is not a standard deviation from 0 to 0.5"
-        )),
-    }
-}
-
-/// `x,y,z` in metres.
-fn parse_point(text: &str) -> Result<[f64; 3], String> {
-    let values: Vec<f64> = text
-        .split(',')
-        .map(|part| part.trim().parse::<f64>())
-        .collect::<Result<_, _>>()
-        .map_err(|_| format!("{text:?} is not x,y,z"))?;
-    match values.as_slice() {
-        [x, y, z] if values.iter().all(|v| v.is_finite() && v.abs() < 100.0) => Ok([*x, *y, *z]),
-        _ => Err(format!(
-            "{text:?} is not x,y,z (three finite numbers in metres)"
         )),
     }
 }

@@ -9,12 +9,5 @@ use teleop_node::{cli::Args, node};
 
 fn main() -> ExitCode {
     logging::init();
-    let args = Args::parse();
-    match node::run(args) {
-        Ok(()) => ExitCode::SUCCESS,
-        Err(error) => {
-            tracing::error!("{error:#}");
-            ExitCode::FAILURE
-        }
-    }
+    logging::exit_code(node::run(Args::parse()))
 }

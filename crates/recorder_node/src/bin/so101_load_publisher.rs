@@ -79,13 +79,7 @@ fn image_data(len: usize, k: u64) -> Vec<u8> {
 
 fn main() -> ExitCode {
     logging::init();
-    match run(Args::parse()) {
-        Ok(()) => ExitCode::SUCCESS,
-        Err(error) => {
-            tracing::error!("{error:#}");
-            ExitCode::FAILURE
-        }
-    }
+    logging::exit_code(run(Args::parse()))
 }
 
 fn run(args: Args) -> Result<()> {

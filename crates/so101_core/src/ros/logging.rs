@@ -30,6 +30,17 @@ pub fn init() {
         .try_init();
 }
 
+/// A binary's exit status from its run: failure with the error chain logged, or success.
+pub fn exit_code(result: anyhow::Result<()>) -> std::process::ExitCode {
+    match result {
+        Ok(()) => std::process::ExitCode::SUCCESS,
+        Err(error) => {
+            tracing::error!("{error:#}");
+            std::process::ExitCode::FAILURE
+        }
+    }
+}
+
 /// From now on, events of the stack's crates are also published on /rosout through `handle`.
 pub fn attach_rosout(handle: NodeLoggingHandle) {
     let _ = ROSOUT.set(handle);

@@ -27,6 +27,17 @@ pub fn command_subscription() -> QosProfile {
     reliable(100)
 }
 
+/// Latched: reliable, transient local, keep last 1, as robot_state_publisher offers
+/// /robot_description and tf2 /tf_static: a peer that joins later still gets the last message.
+pub fn latched() -> QosProfile {
+    QosProfile::publisher_default()
+        .reliability(Reliability::Reliable {
+            when_full: WhenFull::DEFAULT,
+        })
+        .durability(Durability::TransientLocal)
+        .history(History::KeepLast { depth: 1 })
+}
+
 /// rclpy's service default (rmw_qos_profile_services_default): reliable, volatile, keep last 10.
 pub fn service() -> QosProfile {
     reliable(10)

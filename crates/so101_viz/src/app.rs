@@ -1,0 +1,231 @@
+//! so101_rerun: the stack in the Rerun viewer, live or from episode bags.
+
+use std::path::{Path, PathBuf};
+
+use anyhow::{bail, Context as _, Result};
+use clap::{Args as ClapArgs, Parser, Subcommand};
+use nalgebra::Isometry3;
+use so101_core::kinematics::SIM_BASE_IN_WORLD;
+use so101_core::robot::DEFAULT_SCENE;
+use so101_core::ros::shutdown::Shutdown;
+use so101_core::ros::NodeArgs;
+
+use crate::bag;
+use crate::bridge::Bridge;
+use crate::rerun_log::SceneLog;
+use crate::scene_geometry::SceneGeometry;
+
+const APPLICATION_ID: &str = "so101";
+
+/// Shows the SO-101 stack in Rerun: joint positions and commands, camera images, the arm in 3D
+/// (from the shared kinematic model, with the scene's meshes when installed), cube, bin, reward and
+/// success. Live from the topics (`live`), or from recorder_node's episode bags (`bag`).
+#[derive(Debug, Parser)]
+#[command(version)]
+pub struct Args {
+    #[command(subcommand)]
+    pub command: Command,
+    #[command(flatten)]
+    pub scene: SceneArgs,
+}
+
+#[derive(Debug, ClapArgs)]
+pub struct SceneArgs {
+    /// MJCF scene the shapes are read from.
+    #[arg(long, global = true, default_value = DEFAULT_SCENE)]
+    pub scene: PathBuf,
+    /// Draw the arm with boxes even where the scene's meshes are installed.
+    #[arg(long, global = true)]
+    pub no_meshes: bool,
+    /// Where the arm's base sits in the world, "x,y,z" in m (default: where the sim puts it).
+    #[arg(long, global = true, value_parser = so101_core::cli_values::parse_point)]
+    pub base_xyz: Option<[f64; 3]>,
+    /// Camera images logged per second of sim time, per camera (0: every image). Full-rate
+    /// 640x480 images make large recordings.
+    #[arg(long, global = true, default_value_t = 5.0)]
+    pub image_rate: f64,
+}
+
+#[derive(Debug, Subcommand)]
+pub enum Command {
+    /// Subscribe to the stack's topics and log them as they come.
+    Live(LiveArgs),
+    /// Turn episode bags into .rrd recordings, one per episode.
+    Bag(BagArgs),
+}
+
+#[derive(Debug, ClapArgs)]
+pub struct LiveArgs {
+    /// Write the recording to this .rrd file.
+    #[arg(long, group = "sink")]
+    pub save: Option<PathBuf>,
+    /// Stream to a running viewer (`rerun`), e.g. rerun+http://127.0.0.1:9876/proxy.
+    #[arg(long, group = "sink", num_args = 0..=1, default_missing_value = "rerun+http://127.0.0.1:9876/proxy")]
+    pub connect: Option<String>,
+    /// Start a viewer (the `rerun` executable on PATH, e.g. .venv/bin/rerun) and stream to it.
+    #[arg(long, group = "sink")]
+    pub spawn: bool,
+    /// Cameras to show, comma-separated ("none" for none).
+    #[arg(long, default_value = "top,front,wrist", value_delimiter = ',')]
+    pub cameras: Vec<String>,
+    /// Stop after this many seconds.
+    #[arg(long)]
+    pub duration: Option<f64>,
+    #[command(flatten)]
+    pub node: NodeArgs,
+}
+
+#[derive(Debug, ClapArgs)]
+pub struct BagArgs {
+    /// Episode bag directories, or directories holding episode_* directories.
+    #[arg(required = true)]
+    pub bags: Vec<PathBuf>,
+    /// Directory for the recordings (EPISODE.rrd).
+    #[arg(long, default_value = "rrd")]
+    pub output: PathBuf,
+}
+
+fn scene_log(rec: rerun::RecordingStream, args: &SceneArgs) -> Result<SceneLog> {
+    let scene = SceneGeometry::from_scene_file(&args.scene)?;
+    let meshes = !args.no_meshes && scene.has_meshes();
+    let [x, y, z] = args.base_xyz.unwrap_or(SIM_BASE_IN_WORLD);
+    let log = SceneLog::new(rec);
+    log.scene(&scene, &Isometry3::translation(x, y, z), meshes)?;
+    Ok(log)
+}
+
+pub fn run(args: Args) -> Result<()> {
+    if !(args.scene.image_rate >= 0.0 && args.scene.image_rate.is_finite()) {
+        bail!("--image-rate must be 0 or more");
+    }
+    match &args.command {
+        Command::Live(live) => run_live(live, &args.scene),
+        Command::Bag(bags) => run_bags(bags, &args.scene),
+    }
+}
+
+fn run_live(args: &LiveArgs, scene: &SceneArgs) -> Result<()> {
+    let builder = rerun::RecordingStreamBuilder::new(APPLICATION_ID);
+    let rec = if let Some(path) = &args.save {
+        builder
+            .save(path)
+            .with_context(|| format!("cannot write {}", path.display()))?
+    } else if let Some(url) = &args.connect {
+        builder
+            .connect_grpc_opts(url.clone())
+            .with_context(|| format!("cannot connect to {url}"))?
+    } else if args.spawn {
+        builder
+            .spawn()
+            .context("cannot start the viewer (is `rerun` on PATH? .venv/bin has one)")?
+    } else {
+        bail!("where to: --save FILE.rrd, --connect [URL] or --spawn");
+    };
+    let shutdown = Shutdown::on_signals().context("cannot install the signal handlers")?;
+    let cameras: Vec<String> = args
+        .cameras
+        .iter()
+        .filter(|c| !c.is_empty() && *c != "none")
+        .cloned()
+        .collect();
+    let mut bridge = Bridge::new(scene_log(rec, scene)?, scene.image_rate);
+    crate::live::run(&mut bridge, &args.node, &cameras, args.duration, &shutdown)?;
+    bridge
+        .log()
+        .stream()
+        .flush_blocking()
+        .context("cannot flush the recording")?;
+    tracing::info!(counts = ?bridge.counts, "bridge stopped");
+    Ok(())
+}
+
+/// Episode directories: the given ones, and the episode_* directories inside the others.
+fn episodes(paths: &[PathBuf]) -> Vec<PathBuf> {
+    let mut found = Vec::new();
+    for path in paths {
+        if bag::mcap_files(path).is_ok() {
+            found.push(path.clone());
+        } else if let Ok(entries) = std::fs::read_dir(path) {
+            let mut inner: Vec<PathBuf> = entries
+                .filter_map(|e| e.ok().map(|e| e.path()))
+                .filter(|p| {
+                    p.is_dir()
+                        && p.file_name()
+                            .is_some_and(|n| n.to_string_lossy().starts_with("episode_"))
+                })
+                .collect();
+            inner.sort();
+            found.extend(inner);
+        } else {
+            found.push(path.clone()); // reported as unreadable below
+        }
+    }
+    found
+}
+
+fn run_bags(args: &BagArgs, scene: &SceneArgs) -> Result<()> {
+    std::fs::create_dir_all(&args.output)
+        .with_context(|| format!("cannot create {}", args.output.display()))?;
+    let episodes = episodes(&args.bags);
+    if episodes.is_empty() {
+        bail!("no episode bags in {:?}", args.bags);
+    }
+    let (mut written, mut failed) = (0, 0);
+    for (index, episode) in episodes.iter().enumerate() {
+        let name = episode
+            .file_name()
+            .map_or_else(|| "episode".into(), |n| n.to_string_lossy().into_owned());
+        let output = args.output.join(format!("{name}.rrd"));
+        match convert_one(episode, &output, &name, scene) {
+            Ok(report) => {
+                written += 1;
+                if let Some(reason) = &report.truncated {
+                    tracing::warn!(episode = %name, %reason, "bag ends early: what was read is kept");
+                }
+                tracing::info!(
+                    "[{}/{}] {} -> {} ({} messages, {} undecodable)",
+                    index + 1,
+                    episodes.len(),
+                    episode.display(),
+                    output.display(),
+                    report.messages,
+                    report.undecodable
+                );
+            }
+            Err(error) => {
+                failed += 1;
+                tracing::error!(episode = %episode.display(), "skipped: {error:#}");
+            }
+        }
+    }
+    println!(
+        "{written} recording(s) in {}; {failed} episode(s) skipped",
+        args.output.display()
+    );
+    if written == 0 {
+        bail!("no episode could be converted");
+    }
+    Ok(())
+}
+
+fn convert_one(
+    episode: &Path,
+    output: &Path,
+    name: &str,
+    scene: &SceneArgs,
+) -> Result<bag::BagReport> {
+    // Checked before the file is created, so a bad bag leaves no empty recording behind.
+    bag::mcap_files(episode)?;
+    let rec = rerun::RecordingStreamBuilder::new(APPLICATION_ID)
+        .recording_id(name)
+        .save(output)
+        .with_context(|| format!("cannot write {}", output.display()))?;
+    let mut bridge = Bridge::new(scene_log(rec, scene)?, scene.image_rate);
+    let report = bag::replay(episode, &mut bridge)?;
+    bridge
+        .log()
+        .stream()
+        .flush_blocking()
+        .context("cannot flush the recording")?;
+    Ok(report)
+}

@@ -1,0 +1,146 @@
+//! Episode bags (recorder_node's rosbag2 MCAP directories) read back into a [`Bridge`].
+
+use std::path::{Path, PathBuf};
+
+use byteorder::{BigEndian, LittleEndian};
+use serde::de::DeserializeOwned;
+use so101_msgs::geometry_msgs::PoseStamped;
+use so101_msgs::sensor_msgs::{Image, JointState};
+use so101_msgs::std_msgs::{Bool, Float64};
+
+use crate::bridge::Bridge;
+
+#[derive(Debug, thiserror::Error)]
+pub enum BagError {
+    #[error("{0}: no MCAP file (not an episode bag)")]
+    NoFiles(PathBuf),
+    #[error("cannot read {path}: {source}")]
+    Read {
+        path: PathBuf,
+        source: std::io::Error,
+    },
+    #[error("cannot log to Rerun: {0}")]
+    Log(#[from] rerun::RecordingStreamError),
+}
+
+/// What one bag gave.
+#[derive(Debug, Default, Clone, PartialEq, Eq)]
+pub struct BagReport {
+    pub messages: u64,
+    /// Messages that could not be decoded (logged at debug).
+    pub undecodable: u64,
+    /// Why a file ended early (a recording cut short leaves a truncated file): what was read
+    /// before is kept.
+    pub truncated: Option<String>,
+}
+
+/// The episode's MCAP files in recording order (split bags: name_0, name_1, ..., name_10).
+pub fn mcap_files(episode: &Path) -> Result<Vec<PathBuf>, BagError> {
+    let entries = std::fs::read_dir(episode).map_err(|source| BagError::Read {
+        path: episode.to_owned(),
+        source,
+    })?;
+    let mut files: Vec<PathBuf> = entries
+        .filter_map(|entry| entry.ok().map(|e| e.path()))
+        .filter(|path| path.extension().is_some_and(|ext| ext == "mcap"))
+        .collect();
+    files.sort_by_key(|path| (path.as_os_str().len(), path.clone()));
+    if files.is_empty() {
+        return Err(BagError::NoFiles(episode.to_owned()));
+    }
+    Ok(files)
+}
+
+/// A CDR payload (4-byte encapsulation header, then the data) as `T`.
+fn decode<T: DeserializeOwned>(data: &[u8]) -> Option<T> {
+    let (header, payload) = (data.get(..4)?, data.get(4..)?);
+    let decoded = match header[1] {
+        0x01 => cdr_encoding::from_bytes::<T, LittleEndian>(payload),
+        0x00 => cdr_encoding::from_bytes::<T, BigEndian>(payload),
+        _ => return None,
+    };
+    decoded.ok().map(|(value, _)| value)
+}
+
+/// Feeds every message of the episode at `episode` to `bridge`, in recording order.
+pub fn replay(episode: &Path, bridge: &mut Bridge) -> Result<BagReport, BagError> {
+    let mut report = BagReport::default();
+    for file in mcap_files(episode)? {
+        let bytes = std::fs::read(&file).map_err(|source| BagError::Read {
+            path: file.clone(),
+            source,
+        })?;
+        for message in mcap::MessageStream::new(&bytes).map_err(|error| BagError::Read {
+            path: file.clone(),
+            source: std::io::Error::other(error.to_string()),
+        })? {
+            let message = match message {
+                Ok(message) => message,
+                Err(error) => {
+                    report.truncated = Some(format!("{}: {error}", file.display()));
+                    break;
+                }
+            };
+            report.messages += 1;
+            let topic = message.channel.topic.as_str();
+            let data = message.data.as_ref();
+            let handled =
+                if topic.ends_with("/joint_states") && !topic.ends_with("leader/joint_states") {
+                    decode::<JointState>(data).map(|m| bridge.joint_state(&m))
+                } else if topic.ends_with("/joint_commands") {
+                    decode::<JointState>(data).map(|m| bridge.command(&m))
+                } else if topic.ends_with("/cube/pose") {
+                    decode::<PoseStamped>(data).map(|m| bridge.cube(&m))
+                } else if topic.ends_with("/task/reward") {
+                    decode::<Float64>(data).map(|m| bridge.reward(m.data))
+                } else if topic.ends_with("/task/success") {
+                    decode::<Bool>(data).map(|m| bridge.success(m.data))
+                } else if let Some(camera) = camera_name(topic) {
+                    decode::<Image>(data).map(|m| bridge.image(camera, &m))
+                } else {
+                    Some(Ok(()))
+                };
+            match handled {
+                Some(result) => result?,
+                None => {
+                    report.undecodable += 1;
+                    tracing::debug!(topic, "undecodable message");
+                }
+            }
+        }
+    }
+    Ok(report)
+}
+
+/// `top` of `/camera/top/image_raw` (any namespace before it).
+pub fn camera_name(topic: &str) -> Option<&str> {
+    let rest = topic.strip_suffix("/image_raw")?;
+    let (before, name) = rest.rsplit_once('/')?;
+    (before.ends_with("/camera") || before == "camera").then_some(name)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn camera_names_come_from_the_topic() {
+        assert_eq!(camera_name("/camera/top/image_raw"), Some("top"));
+        assert_eq!(camera_name("/left/camera/wrist/image_raw"), Some("wrist"));
+        assert_eq!(camera_name("/camera/top/image_raw/compressed"), None);
+        assert_eq!(camera_name("/joint_states"), None);
+    }
+
+    #[test]
+    fn a_cdr_payload_decodes_into_the_message() {
+        let state = JointState {
+            name: vec!["gripper".into()],
+            position: vec![0.5],
+            ..Default::default()
+        };
+        let mut bytes = vec![0x00, 0x01, 0x00, 0x00];
+        bytes.extend(cdr_encoding::to_vec::<_, LittleEndian>(&state).expect("encodes"));
+        assert_eq!(decode::<JointState>(&bytes), Some(state));
+        assert_eq!(decode::<JointState>(&bytes[..6]), None);
+    }
+}

@@ -1,0 +1,85 @@
+//! The live bridge: the stack's topics -> [`Bridge`], until a signal or --duration.
+
+use std::time::{Duration, Instant};
+
+use anyhow::Result;
+use ros2_client::Subscription;
+use so101_core::ros::shutdown::Shutdown;
+use so101_core::ros::{qos, NodeArgs, RosNode};
+use so101_msgs::geometry_msgs::PoseStamped;
+use so101_msgs::sensor_msgs::{Image, JointState};
+use so101_msgs::std_msgs::{Bool, Float64};
+
+use crate::bridge::Bridge;
+
+struct Topics {
+    joint_states: Subscription<JointState>,
+    commands: Subscription<JointState>,
+    cube: Subscription<PoseStamped>,
+    reward: Subscription<Float64>,
+    success: Subscription<Bool>,
+    cameras: Vec<(String, Subscription<Image>)>,
+}
+
+/// Logs what the stack publishes until `shutdown` or `duration` (s).
+pub fn run(
+    bridge: &mut Bridge,
+    node_args: &NodeArgs,
+    cameras: &[String],
+    duration: Option<f64>,
+    shutdown: &Shutdown,
+) -> Result<()> {
+    let mut node = RosNode::start("so101_rerun_bridge", node_args)?;
+    let topics = Topics {
+        joint_states: node.subscription("joint_states", qos::reliable(100))?,
+        commands: node.subscription("joint_commands", qos::reliable(100))?,
+        cube: node.subscription("cube/pose", qos::reliable(100))?,
+        reward: node.subscription("task/reward", qos::reliable(100))?,
+        success: node.subscription("task/success", qos::reliable(100))?,
+        cameras: cameras
+            .iter()
+            .map(|name| {
+                Ok((
+                    name.clone(),
+                    node.subscription(&format!("camera/{name}/image_raw"), qos::reliable(4))?,
+                ))
+            })
+            .collect::<Result<_>>()?,
+    };
+    tracing::info!(cameras = ?cameras, "bridge running");
+    let started = Instant::now();
+    while !shutdown.is_requested() && duration.is_none_or(|s| started.elapsed().as_secs_f64() < s) {
+        let mut idle = true;
+        // Joint states first: they carry the sim time the unstamped topics are logged at.
+        while let Ok(Some((message, _))) = topics.joint_states.take() {
+            bridge.joint_state(&message)?;
+            idle = false;
+        }
+        while let Ok(Some((message, _))) = topics.commands.take() {
+            bridge.command(&message)?;
+            idle = false;
+        }
+        while let Ok(Some((message, _))) = topics.cube.take() {
+            bridge.cube(&message)?;
+            idle = false;
+        }
+        while let Ok(Some((message, _))) = topics.reward.take() {
+            bridge.reward(message.data)?;
+            idle = false;
+        }
+        while let Ok(Some((message, _))) = topics.success.take() {
+            bridge.success(message.data)?;
+            idle = false;
+        }
+        for (name, subscription) in &topics.cameras {
+            while let Ok(Some((message, _))) = subscription.take() {
+                bridge.image(name, &message)?;
+                idle = false;
+            }
+        }
+        if idle {
+            std::thread::sleep(Duration::from_millis(2));
+        }
+    }
+    Ok(())
+}
