@@ -16,6 +16,8 @@ are truncated by the registration's max_episode_steps.
 from __future__ import annotations
 
 import os
+import signal
+import uuid
 import subprocess
 import tempfile
 import time
@@ -53,7 +55,7 @@ class So101SimEnv(gym.Env):
             self.observation_space = state_space
         self._task, self._rate, self._lite, self._timeout = task, control_rate, lite, timeout
         self._dense_reward = dense_reward
-        self._namespace = f"gym_{os.getpid()}_{id(self) % 100000}"
+        self._namespace = f"gym_{os.getpid()}_{uuid.uuid4().hex[:8]}"
         self._process: subprocess.Popen | None = None
         self._log = tempfile.NamedTemporaryFile(prefix="so101_gym_sim_", suffix=".log", delete=False)
         self._context = rclpy.Context()
@@ -83,6 +85,9 @@ class So101SimEnv(gym.Env):
         self._step_client = self._node.create_client(Trigger, f"{ns}/sim/step")
         self._reset_client = self._node.create_client(Trigger, f"{ns}/sim/reset")
         self._trigger = Trigger.Request
+        self._head_start = 0.002  # s between a command and its step call, doubled when one is late
+        self._sent = 0  # commands published to the current sim
+        self.late_commands = 0  # steps that ran before their command arrived
         self._JointState = JointState
 
     # ------------------------------------------------------------------ plumbing
@@ -115,6 +120,7 @@ class So101SimEnv(gym.Env):
             command.append("--lite")
         if self._dense_reward:
             command.append("--dense-reward")
+        self._sent = 0
         self._process = subprocess.Popen(command, env=node_environment(), stdin=subprocess.DEVNULL, stdout=self._log, stderr=self._log)
         self._spin_until(lambda: self._step_client.service_is_ready() and self._reset_client.service_is_ready(), "services")
         self._spin_until(lambda: self._commands.get_subscription_count() > 0, "/joint_commands subscription")
@@ -125,11 +131,12 @@ class So101SimEnv(gym.Env):
 
     def _stop_sim(self) -> None:
         if self._process is not None and self._process.poll() is None:
-            self._process.send_signal(2)
+            self._process.send_signal(signal.SIGINT)
             try:
                 self._process.wait(timeout=10)
             except subprocess.TimeoutExpired:
                 self._process.kill()
+                self._process.wait()
         self._process = None
         self._latest.clear()
 
@@ -166,15 +173,28 @@ class So101SimEnv(gym.Env):
         return self._observe(counts), {}
 
     def step(self, action):
-        action = np.clip(np.asarray(action, dtype=np.float64), LIMITS[:, 0], LIMITS[:, 1])
+        action = np.asarray(action, dtype=np.float64)
+        if action.shape != (6,) or not np.all(np.isfinite(action)):
+            raise ValueError(f"an action is six finite joint targets, not {action}")
+        action = np.clip(action, LIMITS[:, 0], LIMITS[:, 1])
         counts = dict(self._counts)
         self._commands.publish(self._JointState(name=JOINT_NAMES, position=[float(v) for v in action]))
-        time.sleep(0.002)  # the command reaches the sim before the step that must apply it
-        self._call(self._step_client, "/sim/step")
+        self._sent += 1
+        # A topic and a service are not ordered: give the command a head start over the step
+        # call, and check in the answer (commands taken so far) that it made it into this step.
+        time.sleep(self._head_start)
+        answer = self._call(self._step_client, "/sim/step")
+        taken = int(answer.message.rsplit("commands=", 1)[-1]) if "commands=" in answer.message else self._sent
+        late = taken < self._sent
+        if late:
+            # The step ran with the previous action; a loaded machine: give commands longer.
+            self.late_commands += 1
+            self._head_start = min(0.02, self._head_start * 2)
+            self._sent = taken + 1  # the late one is taken with the next step
         observation = self._observe(counts)
         success = bool(self._latest["success"].data)
         terminated = success and self._task == "cube_to_bin"
-        return observation, float(self._latest["reward"].data), terminated, False, {"success": success}
+        return observation, float(self._latest["reward"].data), terminated, False, {"success": success, "command_late": late}
 
     def close(self):
         import rclpy

@@ -10,7 +10,8 @@
   --rerun:  so101_rerun live into a viewer it starts (spawn), a running one (connect[=URL]) or a
             FILE.rrd
 
-Nodes start in order (robot, recorder, control), each once the one before is on the ROS graph.
+Nodes start in order (robot, visualization, recorder, control), each once the one before is on
+the ROS graph.
 The run ends when the control ends by itself (the expert's last episode, the policy's --duration,
 q in the keyboard teleop), at Ctrl-C or SIGTERM, or when a node dies; then the nodes are stopped in
 reverse order with SIGINT (the recorder closes its bag, the driver turns torque off), and
@@ -30,6 +31,7 @@ from __future__ import annotations
 import argparse
 import os
 import shlex
+import shutil
 import signal
 import subprocess
 import sys
@@ -107,7 +109,9 @@ def plan(args) -> list[NodeSpec]:
             sink_args = ["--connect", *([sink.split("=", 1)[1]] if "=" in sink else [])]
         else:
             sink_args = ["--save", sink]
-        specs.append(NodeSpec("so101_rerun", [str(node_binary("so101_rerun")), "live", *sink_args, *ns]))
+        # Only the bridge subscribes to the task's reward this early (the recorder starts after it).
+        specs.append(NodeSpec("so101_rerun", [str(node_binary("so101_rerun")), "live", *sink_args, *ns],
+                              ready="subscriber /task/reward"))
 
     if args.record:
         recorder = [str(node_binary("recorder_node")), "--output", args.bags, "--task", args.task, *ns]
@@ -182,6 +186,8 @@ class Launch:
 
     # ------------------------------------------------------------------ processes
     def start(self, spec: NodeSpec) -> Running:
+        """Starts a node; it gets SIGTERM from the kernel should the launcher die without
+        stopping it (SIGKILL, a crash), so no node outlives the launch."""
         log = self.log_dir / f"{spec.name}.log"
         with open(log, "wb") as out:
             # Every node in a session of its own, so a Ctrl-C at the terminal reaches the launcher
@@ -189,7 +195,7 @@ class Launch:
             # turns Ctrl-C into a key it handles itself).
             stdin = None if spec.terminal else subprocess.PIPE if spec.open_stdin else subprocess.DEVNULL
             process = subprocess.Popen(
-                spec.argv, env=node_environment(), stdin=stdin,
+                [*DIE_WITH_PARENT, *spec.argv], env=node_environment(), stdin=stdin,
                 stdout=None if spec.terminal else out, stderr=out, start_new_session=not spec.terminal)
         entry = Running(spec, process, log)
         self.running.append(entry)
@@ -199,7 +205,8 @@ class Launch:
         return entry
 
     def stop_all(self) -> None:
-        """SIGINT to each node in reverse start order, each given stop_timeout to exit, then SIGKILL."""
+        """SIGINT to each node in reverse start order, each given stop_timeout to exit, then SIGKILL.
+        A second Ctrl-C (or SIGTERM) meanwhile hurries it: the nodes still running are killed."""
         for entry in reversed(self.running):
             if entry.process.poll() is not None:
                 continue
@@ -207,10 +214,14 @@ class Launch:
             entry.process.send_signal(signal.SIGINT)
             try:
                 entry.process.wait(timeout=self.stop_timeout)
-            except subprocess.TimeoutExpired:
-                print(f"so101-launch: {entry.spec.name} did not stop within {self.stop_timeout:.0f} s: killed", flush=True)
-                entry.process.kill()
-                entry.process.wait()
+            except (subprocess.TimeoutExpired, KeyboardInterrupt) as reason:
+                why = "was hurried" if isinstance(reason, KeyboardInterrupt) else f"did not stop within {self.stop_timeout:.0f} s"
+                print(f"so101-launch: {entry.spec.name} {why}: killed", flush=True)
+                for other in self.running:
+                    if other.process.poll() is None and (other is entry or isinstance(reason, KeyboardInterrupt)):
+                        other.stopped_by_us = True
+                        other.process.kill()
+                        other.process.wait()
         if self._graph is not None:
             import rclpy
 
@@ -221,7 +232,8 @@ class Launch:
     def watch(self, bags: Path | None) -> Running | None:
         """Until a node exits; returns it (None when none is left). Meanwhile reports each episode
         the recorder closes in `bags`."""
-        reported: set[Path] = set()
+        # Episodes already there (an earlier run's) are not this run's.
+        reported: set[Path] = set(bags.glob("episode_*/metadata.yaml")) if bags is not None else set()
         while self.running:
             if bags is not None:
                 report_closed_episodes(bags, reported)
@@ -251,8 +263,14 @@ def report_closed_episodes(bags: Path, reported: set[Path]) -> None:
 
 
 def stop_like_ctrl_c(_signum, _frame) -> None:
-    """SIGTERM (a service manager, kill) stops the run as Ctrl-C does."""
+    """SIGTERM (a service manager, kill) and SIGHUP (the terminal closed) stop the run as Ctrl-C does."""
     raise KeyboardInterrupt
+
+
+# Each node gets SIGTERM from the kernel when the launcher dies (prctl PDEATHSIG, set by
+# util-linux's setpriv just before it execs the node; a preexec_fn would not be safe here, the
+# launcher's rclpy graph node runs DDS threads).
+DIE_WITH_PARENT = ["setpriv", "--pdeathsig", "TERM", "--"] if shutil.which("setpriv") else []
 
 
 def tail(log: Path, lines: int = 15) -> str:
@@ -307,6 +325,9 @@ def parser() -> argparse.ArgumentParser:
 def main(argv: list[str] | None = None) -> int:
     argv = sys.argv[1:] if argv is None else argv
     args = parser().parse_args(argv)
+    if args.rerun and args.rerun.startswith("connect") and not args.host_network:
+        raise SystemExit("so101-launch: --rerun connect reaches a viewer on this network namespace's loopback, not the "
+                         "host's: use --rerun spawn or --rerun FILE.rrd, or --host-network")
     if not args.host_network and network_namespace_problem():
         # Re-run inside a private network namespace; every node inherits it.
         os.execv(str(ISOLATED), [str(ISOLATED), sys.executable, "-m", "so101_lerobot.launch", *argv])
@@ -322,6 +343,7 @@ def main(argv: list[str] | None = None) -> int:
 
     launch = Launch(log_dir, args.ready_timeout, args.stop_timeout, args.namespace)
     signal.signal(signal.SIGTERM, stop_like_ctrl_c)
+    signal.signal(signal.SIGHUP, stop_like_ctrl_c)
     status = 0
     try:
         for spec in specs:

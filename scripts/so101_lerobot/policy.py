@@ -57,11 +57,14 @@ class StackPolicy:
             raise PolicyError(f"cannot load a LeRobot policy config from {source!r} ({type(error).__name__}: {error})") from error
         config.pretrained_path = Path(source) if Path(source).exists() else source
         config.device = self.device
-        self.policy = get_policy_class(config.type).from_pretrained(source, config=config)
+        try:
+            self.policy = get_policy_class(config.type).from_pretrained(source, config=config)
+            overrides = {"device_processor": {"device": self.device}}
+            self.preprocessor, self.postprocessor = make_pre_post_processors(
+                config, pretrained_path=source, preprocessor_overrides=overrides)
+        except Exception as error:  # noqa: BLE001 - missing weights or processors, a bad file
+            raise PolicyError(f"cannot load the {config.type} policy of {source!r} ({type(error).__name__}: {error})") from error
         self.policy.eval()
-        overrides = {"device_processor": {"device": self.device}}
-        self.preprocessor, self.postprocessor = make_pre_post_processors(
-            config, pretrained_path=source, preprocessor_overrides=overrides)
         self.config = config
 
         inputs = config.input_features
@@ -70,9 +73,12 @@ class StackPolicy:
         action = config.output_features.get("action")
         if action is None or tuple(action.shape) != (6,):
             raise PolicyError(f"the policy's action is {action}, not six joint targets")
+        visual = [key for key, feature in inputs.items() if feature.type is FeatureType.VISUAL]
+        if unnamed := [key for key in visual if not key.startswith(IMAGE_PREFIX)]:
+            raise PolicyError(f"the policy's images {unnamed} are not observation.images.<camera>")
         self.cameras = [
-            CameraInput(key.removeprefix(IMAGE_PREFIX), int(feature.shape[1]), int(feature.shape[2]))
-            for key, feature in inputs.items() if feature.type is FeatureType.VISUAL
+            CameraInput(key.removeprefix(IMAGE_PREFIX), int(inputs[key].shape[1]), int(inputs[key].shape[2]))
+            for key in visual
         ]
         others = [key for key, feature in inputs.items() if key != STATE and feature.type is not FeatureType.VISUAL]
         if others:

@@ -85,7 +85,15 @@ def run_live(args, policy: StackPolicy) -> int:
                 raise SystemExit(f"so101-run-policy: no {prefix}/sim/reset service within 20 s")
             future = client.call_async(Trigger.Request())
             rclpy.spin_until_future_complete(node, future, timeout_sec=10.0)
+            if not future.done() or not future.result().success:
+                raise SystemExit(f"so101-run-policy: {prefix}/sim/reset did not succeed")
         deadline = time.monotonic() + args.startup_timeout
+        # The arm's node must hear the first command: wait until it has matched the publisher.
+        while commands.get_subscription_count() == 0:
+            if time.monotonic() > deadline:
+                raise SystemExit(f"so101-run-policy: no subscriber of {prefix}/joint_commands within "
+                                 f"{args.startup_timeout:.0f} s (is the arm's node running?)")
+            rclpy.spin_once(node, timeout_sec=0.05)
         while missing := inputs.stale(camera_names, args.max_age):
             if time.monotonic() > deadline:
                 raise SystemExit(f"so101-run-policy: nothing from {', '.join(missing)} within {args.startup_timeout:.0f} s "
@@ -102,7 +110,7 @@ def run_live(args, policy: StackPolicy) -> int:
             missing = inputs.stale(camera_names, args.max_age)
             if missing:
                 held += 1
-                if held == 1 or held % int(args.fps * 5) == 0:
+                if held == 1 or held % max(1, int(args.fps * 5)) == 0:
                     log.warning("holding the arm: %s stale (> %.2f s)", ", ".join(missing), args.max_age)
             else:
                 started = time.monotonic()
@@ -155,11 +163,12 @@ def evaluate(args, policy: StackPolicy) -> int:
     from .gym_env import So101SimEnv
 
     cameras = {camera.name: (camera.height, camera.width) for camera in policy.cameras}
-    video_cameras = list(cameras)
-    if args.video_camera and args.video_camera not in cameras:
-        cameras[args.video_camera] = (240, 320)
-    if args.video_camera:
-        video_cameras = [args.video_camera]
+    # The video shows the policy's cameras, or --video-camera; a policy without cameras is filmed
+    # from the front.
+    video_camera = args.video_camera or (None if cameras else "front")
+    video_cameras = [video_camera] if video_camera else list(cameras)
+    if video_camera and video_camera not in cameras:
+        cameras[video_camera] = (240, 320)
     output = Path(args.output)
     (output / "videos").mkdir(parents=True, exist_ok=True)
     max_steps = int(round(args.episode_time * args.fps))
@@ -204,6 +213,8 @@ def evaluate(args, policy: StackPolicy) -> int:
         "best_sum_reward": float(np.max(sums)),
         "avg_max_reward": float(np.mean([r.max_reward for r in results])),
         "reward": args.reward,
+        # Steps that ran before their command reached the sim (a heavily loaded machine).
+        "late_commands": env.late_commands,
         "fps": args.fps,
         "episode_time_s": args.episode_time,
     }
@@ -242,7 +253,8 @@ def parser() -> argparse.ArgumentParser:
     ev.add_argument("--reward", choices=["dense", "sparse"], default="dense",
                     help="the sim's reward: dense shows how close a failed episode came (cube_to_bin)")
     ev.add_argument("--lite", action="store_true", help="sim without meshes (faster to render on a CPU)")
-    ev.add_argument("--video-camera", default=None, help="film this camera (320x240) instead of the policy's cameras")
+    ev.add_argument("--video-camera", default=None,
+                    help="film this camera (320x240) instead of the policy's cameras (default for a policy without cameras: front)")
     ev.add_argument("--output", default="eval", help="directory for eval_info.json and videos/")
     return p
 
@@ -255,11 +267,14 @@ def main(argv: list[str] | None = None) -> int:
             raise SystemExit(f"so101-run-policy: --camera {item!r}: expected NAME=TOPIC")
     if args.fps <= 0:
         raise SystemExit("so101-run-policy: --fps must be positive")
+    if args.episode_time <= 0:
+        raise SystemExit("so101-run-policy: --episode-time must be positive")
     try:
         policy = StackPolicy(args.policy, units=args.units, device=args.device, task=args.task)
+        return evaluate(args, policy) if args.eval > 0 else run_live(args, policy)
     except PolicyError as error:
+        # Loading or a non-finite action: the runner stops sending, the arm's node holds.
         raise SystemExit(f"so101-run-policy: {error}") from error
-    return evaluate(args, policy) if args.eval > 0 else run_live(args, policy)
 
 
 if __name__ == "__main__":

@@ -25,6 +25,8 @@ def test_the_gymnasium_env_passes_the_checker_and_steps_the_sim():
             observation, reward, terminated, truncated, info = env.step(target)
         assert np.abs(observation[:6] - target).max() < 0.05, observation[:6]
         assert np.isfinite(reward) and not terminated and not truncated and info["success"] is False
+        # Every command reached the sim before its step (the answer's count says so), or was counted.
+        assert info["command_late"] in (False, True) and env.unwrapped.late_commands < 30
         assert np.linalg.norm(observation[12:15] - cube) < 1e-3, "the cube moved without being touched"
     finally:
         env.close()

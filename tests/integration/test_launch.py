@@ -31,7 +31,10 @@ def gone(pid: int) -> bool:
     except ProcessLookupError:
         return True
     # A zombie not yet reaped by its parent (the launcher, which has exited) counts as gone too.
-    return Path(f"/proc/{pid}/stat").read_text().split()[2] == "Z"
+    try:
+        return Path(f"/proc/{pid}/stat").read_text().split()[2] == "Z"
+    except FileNotFoundError:
+        return True  # reaped meanwhile
 
 
 def test_sim_expert_recording_profile_records_its_episodes_and_ends(tmp_path):

@@ -9,13 +9,14 @@ from __future__ import annotations
 import json
 import math
 import os
+import re
 import subprocess
 import sys
 from pathlib import Path
 
 import numpy as np
 
-from harness import best_effort_qos, wait_until
+from harness import best_effort_qos, reliable_qos, wait_until
 
 JOINTS = ["shoulder_pan", "shoulder_lift", "elbow_flex", "wrist_flex", "wrist_roll", "gripper"]
 LIMITS = [(-1.9199, 1.9199), (-1.7453, 1.7453), (-1.69, 1.69), (-1.6581, 1.6581), (-2.7438, 2.8412), (-0.1745, 1.7453)]
@@ -84,12 +85,16 @@ def test_a_tiny_act_trained_on_a_converted_dataset_runs_through_the_runner(sim_f
     from sensor_msgs.msg import JointState
 
     live = sim_factory("--cameras", CAMERAS, "--namespace", "live")
-    commands = ros.subscribe("/live/joint_commands", JointState, best_effort_qos(1000))
+    commands = ros.subscribe("/live/joint_commands", JointState, reliable_qos(1000))
     done = run([VENV_BIN / "so101-run-policy", checkpoint, "--namespace", "live", "--duration", "3", "--reset"], timeout=120)
     assert done.returncode == 0, done.stdout[-3000:] + done.stderr[-3000:]
     live.assert_alive()
+    # The runner's own count: 90 at 30 Hz (a loaded machine skips late periods rather than
+    # bursting); this probe, matched with the runner some time after it started, gets the later ones.
+    sent = int(re.search(r"(\d+) commands at 30 Hz", done.stdout).group(1))
+    assert 60 <= sent <= 91, done.stdout
     received = commands.messages()
-    assert 60 <= len(received) <= 95, f"{len(received)} commands in 3 s at 30 Hz"
+    assert 20 <= len(received) <= sent, f"{len(received)} of {sent} commands received"
     for msg in received:
         assert list(msg.name) == JOINTS and len(msg.position) == 6
         assert all(np.isfinite(msg.position)), msg.position

@@ -4,6 +4,7 @@ live sim run and from an episode bag, read back with the rerun Python SDK."""
 
 from __future__ import annotations
 
+import signal
 import subprocess
 import time
 import xml.etree.ElementTree as ElementTree
@@ -101,6 +102,7 @@ def test_robot_description_and_tf_match_the_scene(sim_factory, recorder_factory,
             assert abs(float(limit.get("upper")) - JOINT_LIMITS[name][1]) < 1e-3, name
         assert {link.get("name") for link in robot.iter("link")} >= {"base", *LINKS, "grasp_point"}
         # /tf_static is offered latched, as tf2's static broadcaster does (RViz relies on it).
+        wait_until(lambda: ros.node.count_publishers("/tf_static") >= 1, 20.0, "/tf_static", state_publisher)
         (static_info,) = ros.node.get_publishers_info_by_topic("/tf_static")
         assert static_info.topic_type == "tf2_msgs/msg/TFMessage"
         assert static_info.qos_profile.durability == DurabilityPolicy.TRANSIENT_LOCAL
@@ -153,7 +155,7 @@ def test_a_live_run_saved_to_rrd_reads_back_with_the_expected_entities(sim_facto
 
     running = start_and_wait(sim_factory, ros, "--cameras", "top:64x48,wrist:64x48", "--task", "cube_to_bin", "--dense-reward")
     output = tmp_path / "live.rrd"
-    bridge = subprocess.Popen([str(node_binary("so101_rerun")), "live", "--save", str(output), "--duration", "4",
+    bridge = subprocess.Popen([str(node_binary("so101_rerun")), "live", "--save", str(output),
                                "--cameras", "top,wrist", "--image-rate", "0"],
                               stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, env=node_environment())
     # The arm moves once the bridge listens (its camera subscriptions show it on the graph).
@@ -164,6 +166,8 @@ def test_a_live_run_saved_to_rrd_reads_back_with_the_expected_entities(sim_facto
     while time.monotonic() < deadline:
         commands.publish(JointState(name=["shoulder_pan"], position=[0.4]))
         time.sleep(0.05)
+    time.sleep(0.5)
+    bridge.send_signal(signal.SIGINT)  # it flushes the recording and exits
     out, _ = bridge.communicate(timeout=60)
     assert bridge.returncode == 0, out
 
@@ -176,7 +180,7 @@ def test_a_live_run_saved_to_rrd_reads_back_with_the_expected_entities(sim_facto
     }
     missing = expected - set(rows)
     assert not missing, f"missing entities {missing}; have {sorted(rows)}"
-    # Joint states at 100 Hz for ~4 s, camera frames at 30 Hz: all logged.
+    # Joint states at 100 Hz for over 3.5 s, camera frames at 30 Hz: all logged.
     assert rows["/joints/shoulder_pan/position"] > 200, rows["/joints/shoulder_pan/position"]
     assert rows["/cameras/top"] > 60, rows["/cameras/top"]
     pan = scalar_series(output, "/joints/shoulder_pan/position")
@@ -187,7 +191,8 @@ def test_an_episode_bag_becomes_an_rrd_with_every_joint_state(sim_factory, recor
     from mcap.reader import make_reader
 
     sim = sim_factory("--cameras", "top:64x48", "--demo")
-    recorder = recorder_factory("--start")
+    # Small chunks: the damaged copy below, cut in half, still holds whole chunks.
+    recorder = recorder_factory("--start", "--chunk-size", "32768")
     wait_until(lambda: ros.node.count_publishers("/joint_states") >= 1, 20.0, "the sim", sim)
     time.sleep(3.0)
     assert recorder.stop() == 0, recorder.log_tail()

@@ -261,8 +261,12 @@ impl SimLoop {
             self.publish_and_wait(report);
             wait_until_published(frames);
             let time = self.world.time();
-            self.services
-                .answer_step(call, true, format!("t={time:.6}"));
+            self.services.answer_step(
+                call,
+                true,
+                // The commands taken so far, so a client can tell that its command made it.
+                format!("t={time:.6} commands={}", self.inbox.tally.accepted),
+            );
         }
     }
 

@@ -5,7 +5,6 @@ use std::path::{Path, PathBuf};
 use anyhow::{bail, Context as _, Result};
 use clap::{Args as ClapArgs, Parser, Subcommand};
 use nalgebra::Isometry3;
-use so101_core::kinematics::SIM_BASE_IN_WORLD;
 use so101_core::robot::DEFAULT_SCENE;
 use so101_core::ros::shutdown::Shutdown;
 use so101_core::ros::NodeArgs;
@@ -37,7 +36,7 @@ pub struct SceneArgs {
     /// Draw the arm with boxes even where the scene's meshes are installed.
     #[arg(long, global = true)]
     pub no_meshes: bool,
-    /// Where the arm's base sits in the world, "x,y,z" in m (default: where the sim puts it).
+    /// Where the arm's base sits in the world, "x,y,z" in m (default: where the scene mounts it).
     #[arg(long, global = true, value_parser = so101_core::cli_values::parse_point)]
     pub base_xyz: Option<[f64; 3]>,
     /// Camera images logged per second of sim time, per camera (0: every image). Full-rate
@@ -88,9 +87,11 @@ pub struct BagArgs {
 fn scene_log(rec: rerun::RecordingStream, args: &SceneArgs) -> Result<SceneLog> {
     let scene = SceneGeometry::from_scene_file(&args.scene)?;
     let meshes = !args.no_meshes && scene.has_meshes();
-    let [x, y, z] = args.base_xyz.unwrap_or(SIM_BASE_IN_WORLD);
+    let base = args
+        .base_xyz
+        .map_or(scene.base_pose, |[x, y, z]| Isometry3::translation(x, y, z));
     let log = SceneLog::new(rec);
-    log.scene(&scene, &Isometry3::translation(x, y, z), meshes)?;
+    log.scene(&scene, &base, meshes)?;
     Ok(log)
 }
 
@@ -171,10 +172,9 @@ fn run_bags(args: &BagArgs, scene: &SceneArgs) -> Result<()> {
         bail!("no episode bags in {:?}", args.bags);
     }
     let (mut written, mut failed) = (0, 0);
+    let mut used = std::collections::BTreeSet::new();
     for (index, episode) in episodes.iter().enumerate() {
-        let name = episode
-            .file_name()
-            .map_or_else(|| "episode".into(), |n| n.to_string_lossy().into_owned());
+        let name = recording_name(episode, &mut used);
         let output = args.output.join(format!("{name}.rrd"));
         match convert_one(episode, &output, &name, scene) {
             Ok(report) => {
@@ -208,6 +208,27 @@ fn run_bags(args: &BagArgs, scene: &SceneArgs) -> Result<()> {
     Ok(())
 }
 
+/// The recording's name (and file name): the episode directory's, prefixed with its parent's
+/// where two episodes of one run share a name (episode_000000 of two sessions), numbered if
+/// still taken, so no recording overwrites another.
+fn recording_name(episode: &Path, used: &mut std::collections::BTreeSet<String>) -> String {
+    let base = episode
+        .file_name()
+        .map_or_else(|| "episode".into(), |n| n.to_string_lossy().into_owned());
+    let parent = episode
+        .parent()
+        .and_then(Path::file_name)
+        .map(|n| n.to_string_lossy().into_owned());
+    let mut candidates = std::iter::once(base.clone())
+        .chain(parent.map(|parent| format!("{parent}_{base}")))
+        .chain((2..).map(|k| format!("{base}_{k}")));
+    let name = candidates
+        .find(|candidate| !used.contains(candidate))
+        .unwrap_or(base);
+    used.insert(name.clone());
+    name
+}
+
 fn convert_one(
     episode: &Path,
     output: &Path,
@@ -228,4 +249,32 @@ fn convert_one(
         .flush_blocking()
         .context("cannot flush the recording")?;
     Ok(report)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn episodes_of_the_same_name_get_recordings_of_their_own() {
+        let mut used = std::collections::BTreeSet::new();
+        let names: Vec<String> = [
+            "a/bags/episode_000000",
+            "b/bags/episode_000000",
+            "b/bags/episode_000000",
+            "c/episode_000001",
+        ]
+        .iter()
+        .map(|path| recording_name(Path::new(path), &mut used))
+        .collect();
+        assert_eq!(
+            names,
+            [
+                "episode_000000",
+                "bags_episode_000000",
+                "episode_000000_2",
+                "episode_000001"
+            ]
+        );
+    }
 }

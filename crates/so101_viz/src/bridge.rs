@@ -30,7 +30,11 @@ pub fn rgb_pixels(image: &Image) -> Result<Vec<u8>, String> {
     if image.encoding != "rgb8" && image.encoding != "bgr8" {
         return Err(format!("encoding {:?}, not rgb8 or bgr8", image.encoding));
     }
-    if step < row || image.data.len() < step * height {
+    if width == 0 || height == 0 {
+        return Err(format!("an empty {width}x{height} image"));
+    }
+    let needed = step.checked_mul(height);
+    if step < row || needed.is_none_or(|needed| image.data.len() < needed) {
         return Err(format!(
             "{} bytes for {width}x{height} with rows of {step} bytes",
             image.data.len()
@@ -130,13 +134,12 @@ impl Bridge {
     }
 
     pub fn command(&mut self, message: &JointState) -> RecordingStreamResult<()> {
-        let (Some(now), Ok(targets)) = (
-            self.now,
-            targets_from_joint_state(&message.name, &message.position),
-        ) else {
+        let Ok(targets) = targets_from_joint_state(&message.name, &message.position) else {
             self.counts.rejected += 1;
             return Ok(());
         };
+        // Before the first joint state there is no time to put a command at.
+        let Some(now) = self.now else { return Ok(()) };
         self.at(now);
         self.counts.commands += 1;
         self.log
@@ -225,5 +228,7 @@ mod tests {
     fn short_buffers_and_other_encodings_are_refused() {
         assert!(rgb_pixels(&image("rgb8", 2, 2, 6, vec![0; 11])).is_err());
         assert!(rgb_pixels(&image("mono8", 2, 2, 2, vec![0; 4])).is_err());
+        assert!(rgb_pixels(&image("rgb8", 0, 2, 0, vec![])).is_err());
+        assert!(rgb_pixels(&image("rgb8", 1, u32::MAX, u32::MAX, vec![0; 3])).is_err());
     }
 }

@@ -20,6 +20,10 @@ use so101_core::robot::{JointPositions, JOINT_COUNT, JOINT_NAMES};
 use crate::scene_geometry::{LinkGeometry, SceneGeometry};
 
 pub const TIMELINE: &str = "sim_time";
+/// Timeline of wall-clock stamps (ROS time without a simulation).
+pub const WALL_TIMELINE: &str = "ros_time";
+/// Stamps from this many seconds on are wall-clock time (September 2001), not sim time.
+pub const WALL_CLOCK_SINCE: f64 = 1.0e9;
 const ARM_COLOR: [u8; 4] = [236, 236, 228, 255];
 const BOX_COLOR: [u8; 4] = [242, 140, 40, 255];
 const CUBE_COLOR: [u8; 4] = [220, 40, 40, 255];
@@ -54,6 +58,10 @@ fn transform(pose: &Isometry3<f64>) -> rerun::Transform3D {
     )
 }
 
+fn rgba([r, g, b, a]: [u8; 4]) -> rerun::Color {
+    rerun::Color::from_unmultiplied_rgba(r, g, b, a)
+}
+
 fn boxes(geometry: &LinkGeometry, color: [u8; 4]) -> rerun::Boxes3D {
     let centers = geometry.boxes.iter().map(|b| {
         let t = b.pose.translation.vector;
@@ -69,9 +77,7 @@ fn boxes(geometry: &LinkGeometry, color: [u8; 4]) -> rerun::Boxes3D {
     });
     rerun::Boxes3D::from_centers_and_half_sizes(centers, half_sizes)
         .with_quaternions(rotations)
-        .with_colors([rerun::Color::from_unmultiplied_rgba(
-            color[0], color[1], color[2], color[3],
-        )])
+        .with_colors([rgba(color)])
         .with_fill_mode(rerun::FillMode::Solid)
 }
 
@@ -79,6 +85,8 @@ fn boxes(geometry: &LinkGeometry, color: [u8; 4]) -> rerun::Boxes3D {
 pub struct SceneLog {
     rec: RecordingStream,
     links: [String; JOINT_COUNT],
+    /// The cube's half extents, drawn once its first pose arrives (no cube on a real desk).
+    cube_half_extents: std::cell::Cell<Option<[f64; 3]>>,
 }
 
 impl SceneLog {
@@ -86,6 +94,7 @@ impl SceneLog {
         Self {
             rec,
             links: link_paths(),
+            cube_half_extents: std::cell::Cell::new(None),
         }
     }
 
@@ -95,6 +104,7 @@ impl SceneLog {
 
     /// The static scene: axes, furniture, the arm's base pose and every link's shapes (meshes
     /// when `meshes` and installed, else boxes), the cube's box.
+    /// (The cube's box is drawn with its first pose.)
     pub fn scene(
         &self,
         scene: &SceneGeometry,
@@ -103,6 +113,7 @@ impl SceneLog {
     ) -> RecordingStreamResult<()> {
         self.rec
             .log_static("world", &rerun::ViewCoordinates::RIGHT_HAND_Z_UP())?;
+        self.cube_half_extents.set(scene.cube_half_extents);
         for (name, body) in &scene.furniture {
             self.rec
                 .log_static(format!("world/{name}"), &transform(&body.pose))?;
@@ -146,25 +157,18 @@ impl SceneLog {
                     .log_static(format!("{path}/shape"), &boxes(geometry, BOX_COLOR))?;
             }
         }
-        if let Some(half) = scene.cube_half_extents {
-            self.rec.log_static(
-                "world/cube/shape",
-                &rerun::Boxes3D::from_half_sizes([half.map(|h| h as f32)])
-                    .with_colors([rerun::Color::from_unmultiplied_rgba(
-                        CUBE_COLOR[0],
-                        CUBE_COLOR[1],
-                        CUBE_COLOR[2],
-                        CUBE_COLOR[3],
-                    )])
-                    .with_fill_mode(rerun::FillMode::Solid),
-            )?;
-        }
         Ok(())
     }
 
-    /// Sets the time of what is logged next (s of sim time).
+    /// Sets the time of what is logged next: a stamp in s, sim time (from 0) or, from
+    /// [`WALL_CLOCK_SINCE`] on, wall-clock time since the epoch (the physical arm's driver).
     pub fn set_time(&self, seconds: f64) {
-        self.rec.set_duration_secs(TIMELINE, seconds);
+        if seconds >= WALL_CLOCK_SINCE {
+            self.rec
+                .set_timestamp_secs_since_epoch(WALL_TIMELINE, seconds);
+        } else {
+            self.rec.set_duration_secs(TIMELINE, seconds);
+        }
     }
 
     /// Joint positions as time series and the links posed by them.
@@ -210,6 +214,14 @@ impl SceneLog {
     }
 
     pub fn cube(&self, pose: &Isometry3<f64>) -> RecordingStreamResult<()> {
+        if let Some(half) = self.cube_half_extents.take() {
+            self.rec.log_static(
+                "world/cube/shape",
+                &rerun::Boxes3D::from_half_sizes([half.map(|h| h as f32)])
+                    .with_colors([rgba(CUBE_COLOR)])
+                    .with_fill_mode(rerun::FillMode::Solid),
+            )?;
+        }
         self.rec.log("world/cube", &transform(pose))
     }
 

@@ -62,8 +62,10 @@ pub struct FixedBody {
 }
 
 /// The geometry of the base and the six moving links by link name, the furniture, the cube.
-#[derive(Debug, Clone, Default)]
+#[derive(Debug, Clone)]
 pub struct SceneGeometry {
+    /// Where the scene mounts the arm's base in its world.
+    pub base_pose: Isometry3<f64>,
     pub links: BTreeMap<String, LinkGeometry>,
     pub furniture: BTreeMap<String, FixedBody>,
     /// The cube's half extents (m), when the scene has one.
@@ -116,6 +118,16 @@ impl SceneGeometry {
             })
             .collect();
 
+        // The geom type each default class sets.
+        let class_types: BTreeMap<&str, &str> = root
+            .descendants()
+            .filter(|node| node.has_tag_name("default"))
+            .filter_map(|default| {
+                let class = default.attribute("class")?;
+                let geom = default.children().find(|node| node.has_tag_name("geom"))?;
+                Some((class, geom.attribute("type")?))
+            })
+            .collect();
         let body_named = |name: &str| {
             root.descendants()
                 .find(|node| node.has_tag_name("body") && node.attribute("name") == Some(name))
@@ -126,12 +138,8 @@ impl SceneGeometry {
             let mut geometry = LinkGeometry::default();
             for geom in body.children().filter(|node| node.has_tag_name("geom")) {
                 let pose = geom_pose(name, &geom)?;
-                match (
-                    geom.attribute("class"),
-                    geom.attribute("type"),
-                    geom.attribute("mesh"),
-                ) {
-                    (Some("mesh_visual"), _, Some(mesh)) => {
+                match (geom_type(&geom, &class_types), geom.attribute("mesh")) {
+                    ("mesh", Some(mesh)) => {
                         if let Some(file) = mesh_files.get(mesh).filter(|file| file.is_file()) {
                             geometry.meshes.push(MeshShape {
                                 pose,
@@ -139,8 +147,8 @@ impl SceneGeometry {
                             });
                         }
                     }
-                    // Collision boxes and finger pads (their class makes them boxes).
-                    (Some("link_collision" | "finger_pad"), None | Some("box"), None) => {
+                    // The collision boxes and finger pads.
+                    ("box", _) => {
                         let size = numbers::<3>(name, &geom, "size")?.ok_or_else(|| {
                             SceneError::Attribute {
                                 body: name.to_owned(),
@@ -189,7 +197,10 @@ impl SceneGeometry {
             Some(geom) => numbers::<3>("cube", &geom, "size")?,
             None => None,
         };
+        let base =
+            body_named(BASE_LINK).ok_or_else(|| SceneError::MissingBody(BASE_LINK.to_owned()))?;
         Ok(Self {
+            base_pose: geom_pose(BASE_LINK, &base)?,
             links,
             furniture,
             cube_half_extents,
@@ -200,6 +211,16 @@ impl SceneGeometry {
     pub fn has_meshes(&self) -> bool {
         self.links.values().all(|link| !link.meshes.is_empty())
     }
+}
+
+/// A geom's type: its own, else its class default's, else MuJoCo's default (sphere).
+fn geom_type<'a>(geom: &roxmltree::Node<'a, '_>, class_types: &BTreeMap<&str, &'a str>) -> &'a str {
+    geom.attribute("type")
+        .or_else(|| {
+            geom.attribute("class")
+                .and_then(|class| class_types.get(class).copied())
+        })
+        .unwrap_or("sphere")
 }
 
 fn geom_pose(body: &str, geom: &roxmltree::Node) -> Result<Isometry3<f64>, SceneError> {
@@ -262,13 +283,15 @@ mod tests {
         assert_eq!(geometry.furniture["bin"].geometry.boxes.len(), 5);
         assert!((geometry.furniture["bin"].pose.translation.vector.z - 0.75).abs() < 1e-12);
         assert_eq!(geometry.cube_half_extents, Some([0.015; 3]));
+        assert!((geometry.base_pose.translation.vector.z - 0.75).abs() < 1e-12);
     }
 
     #[test]
     fn meshes_are_taken_only_where_their_files_exist() {
-        let text = r#"<mujoco><compiler meshdir="nowhere"/><asset><mesh name="m" file="m.stl"/></asset>
+        let text = r#"<mujoco><compiler meshdir="nowhere"/><default><default class="pad"><geom type="box"/></default></default><asset><mesh name="m" file="m.stl"/></asset>
             <worldbody><body name="base"><geom class="mesh_visual" mesh="m"/>
             <geom class="link_collision" type="box" size="0.01 0.02 0.03" pos="0 0 0.1"/>
+            <geom class="link_collision" size="0.01"/><geom class="pad" size="0.1 0.1 0.1"/>
             <body name="shoulder"><geom class="link_collision" type="box" size="1 1 1"/>
             <body name="upper_arm"><body name="lower_arm"><body name="wrist"><body name="gripper">
             <body name="moving_jaw"/></body></body></body></body></body></body></worldbody></mujoco>"#;
@@ -284,7 +307,7 @@ mod tests {
 
     #[test]
     fn a_malformed_attribute_is_an_error_naming_the_body() {
-        let text = r#"<mujoco><worldbody><body name="base"><geom class="link_collision" size="1 x 1"/></body></worldbody></mujoco>"#;
+        let text = r#"<mujoco><worldbody><body name="base"><geom class="link_collision" type="box" size="1 x 1"/></body></worldbody></mujoco>"#;
         let error = SceneGeometry::from_scene(text, Path::new("/")).expect_err("bad size");
         assert!(error.to_string().contains("base"), "{error}");
     }

@@ -2,14 +2,14 @@
 //! joint state, stamped with the joint state's stamp (sim time with the sim).
 
 use std::path::PathBuf;
-use std::time::Duration;
+use std::time::{Duration, Instant};
 
 use anyhow::{Context as _, Result};
 use clap::Parser;
 use nalgebra::Isometry3;
 use so101_core::command::targets_from_joint_state;
-use so101_core::kinematics::SIM_BASE_IN_WORLD;
-use so101_core::robot::{JointPositions, DEFAULT_SCENE, JOINT_LIMITS, JOINT_NAMES};
+use so101_core::robot::{DEFAULT_SCENE, JOINT_LIMITS, JOINT_NAMES};
+use so101_core::ros::rate_limit::RateLimiter;
 use so101_core::ros::shutdown::Shutdown;
 use so101_core::ros::{qos, NodeArgs, RosNode};
 use so101_msgs::sensor_msgs::JointState;
@@ -34,7 +34,7 @@ pub struct Args {
     /// Parent frame of the arm's base.
     #[arg(long, default_value = "world")]
     pub world_frame: String,
-    /// Where the base sits in the world frame, "x,y,z" in m (default: where the sim's scene puts it).
+    /// Where the base sits in the world frame, "x,y,z" in m (default: where the scene mounts it).
     #[arg(long, value_parser = so101_core::cli_values::parse_point)]
     pub base_xyz: Option<[f64; 3]>,
     /// Prefix of the arm's frame names ("left" gives left/base, left/shoulder, ...).
@@ -67,51 +67,58 @@ pub fn run(args: Args) -> Result<()> {
     let joint_states = node.subscription::<JointState>("joint_states", qos::reliable(100))?;
 
     let frames = Frames::new(&args.frame_prefix);
-    let [x, y, z] = args.base_xyz.unwrap_or(SIM_BASE_IN_WORLD);
+    let base = args.base_xyz.map_or(geometry.base_pose, |[x, y, z]| {
+        Isometry3::translation(x, y, z)
+    });
     description
         .publish(RosString { data: urdf })
         .map_err(|error| anyhow::anyhow!("cannot publish /robot_description: {error:?}"))?;
     tf_static
-        .publish(static_transforms(
-            &frames,
-            &args.world_frame,
-            &Isometry3::translation(x, y, z),
-        ))
+        .publish(static_transforms(&frames, &args.world_frame, &base))
         .map_err(|error| anyhow::anyhow!("cannot publish /tf_static: {error:?}"))?;
     tracing::info!(meshes, scene = %args.scene.display(), "robot description and static transforms published");
 
     let started = std::time::Instant::now();
-    let mut positions: Option<JointPositions> = None;
+    let mut positions = [f64::NAN; JOINT_NAMES.len()];
     let mut published: u64 = 0;
+    let mut failures = RateLimiter::new(Duration::from_secs(5));
     while !shutdown.is_requested()
         && args
             .duration
             .is_none_or(|s| started.elapsed().as_secs_f64() < s)
     {
-        let mut latest = None;
+        let mut idle = true;
+        // One /tf message per joint state, stamped as it is.
         while let Ok(Some((message, _))) = joint_states.take() {
-            match targets_from_joint_state(&message.name, &message.position) {
-                Ok(targets) => {
-                    let known = positions.get_or_insert([f64::NAN; JOINT_NAMES.len()]);
-                    for (joint, value) in known.iter_mut().enumerate() {
-                        if let Some(target) = targets.get(joint) {
-                            // Drawn within the model's range; a reading past a limit is still drawn at it.
-                            *value = JOINT_LIMITS[joint].clamp(target);
-                        }
-                    }
-                    latest = Some(message.header.stamp);
+            idle = false;
+            let targets = match targets_from_joint_state(&message.name, &message.position) {
+                Ok(targets) => targets,
+                Err(error) => {
+                    tracing::debug!(%error, "joint state ignored");
+                    continue;
                 }
-                Err(error) => tracing::debug!(%error, "joint state ignored"),
+            };
+            for (joint, value) in positions.iter_mut().enumerate() {
+                if let Some(target) = targets.get(joint) {
+                    // Drawn within the model's range; a reading past a limit is drawn at it.
+                    *value = JOINT_LIMITS[joint].clamp(target);
+                }
+            }
+            if !positions.iter().all(|v| v.is_finite()) {
+                continue; // not every joint known yet
+            }
+            match tf.publish(joint_transforms(&frames, &positions, message.header.stamp)) {
+                Ok(()) => published += 1,
+                Err(error) => {
+                    if let Some(held_back) = failures.check(Instant::now()) {
+                        tracing::warn!(?error, held_back, "cannot publish /tf");
+                    }
+                }
             }
         }
-        if let (Some(stamp), Some(known)) = (latest, positions) {
-            if known.iter().all(|v| v.is_finite()) {
-                tf.publish(joint_transforms(&frames, &known, stamp))
-                    .map_err(|error| anyhow::anyhow!("cannot publish /tf: {error:?}"))?;
-                published += 1;
-            }
+        if idle {
+            std::thread::sleep(Duration::from_millis(2));
         }
-        std::thread::sleep(Duration::from_millis(2));
     }
     tracing::info!(published, "state publisher stopped");
     Ok(())
