@@ -39,12 +39,26 @@ pub fn find_servos(bus: &mut ServoBus, max_id: u8) -> Result<Vec<ServoInfo>, Bus
     let mut found = Vec::new();
     for id in 1..=max_id.min(crate::protocol::MAX_ID) {
         match bus.ping(id) {
-            Ok(_) => found.push(identify(bus, id)?),
+            Ok(_) => found.push(identify_answering(bus, id)?),
             Err(BusError::NoAnswer { .. }) => {}
             Err(error) => return Err(error),
         }
     }
     Ok(found)
+}
+
+/// Reads model and firmware of a servo that answered its ping. The probe's bus settings have no
+/// retries (an absent id must cost little), so a lost reply here is read again rather than
+/// ending the scan.
+fn identify_answering(bus: &mut ServoBus, id: u8) -> Result<ServoInfo, BusError> {
+    const ATTEMPTS: u32 = 4;
+    let mut attempt = 1;
+    loop {
+        match identify(bus, id) {
+            Err(BusError::NoAnswer { .. }) if attempt < ATTEMPTS => attempt += 1,
+            result => return result,
+        }
+    }
 }
 
 /// Bus settings for probing: no retries and a short wait (an absent id never answers).
