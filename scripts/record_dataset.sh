@@ -17,7 +17,7 @@ seed=0
 output="runs/dataset-$(date +%Y%m%d-%H%M%S)"
 sim_args=()
 launch_args=()
-usage() { sed -n '2,10p' "${BASH_SOURCE[0]}" | sed 's/^# \{0,1\}//'; }
+usage() { sed -n '2,9p' "${BASH_SOURCE[0]}" | sed 's/^# \{0,1\}//'; }
 while [ $# -gt 0 ]; do
     case "$1" in
         --episodes) episodes="$2"; shift 2 ;;
