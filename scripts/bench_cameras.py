@@ -149,10 +149,7 @@ def main() -> int:
         + "; ".join(f"{name} {c['rendered'] / rt['wall_seconds']:.1f} frames/s ({c['skipped']} skipped)"
                     for name, c in rt["cameras"].items()),
     ]
-    print("\n".join(lines))
-    if args.json:
-        args.json.write_text(json.dumps(results, indent=2))
-    return 0
+    return bench_common.report(lines, results, args.json)
 
 
 if __name__ == "__main__":

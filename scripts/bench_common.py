@@ -1,8 +1,9 @@
-"""What the benchmark scripts share: the environment of the Rust nodes they start, and an rclpy
-subscriber process that counts the messages of one topic."""
+"""What the benchmark scripts share: the environment of the Rust nodes they start, an rclpy
+subscriber process that counts the messages of one topic, and how a report is put out."""
 
 from __future__ import annotations
 
+import json
 import os
 
 
@@ -34,3 +35,12 @@ except KeyboardInterrupt:
     pass
 print(count[0])
 """
+
+
+def report(lines: list[str], results, json_path) -> int:
+    """Prints a benchmark's Markdown lines and writes its raw numbers to `json_path` (if given);
+    the exit status."""
+    print("\n".join(lines))
+    if json_path:
+        json_path.write_text(json.dumps(results, indent=2))
+    return 0

@@ -10,7 +10,6 @@ namespace (scripts/bench.sh does that). Prints a Markdown report; --json keeps t
 from __future__ import annotations
 
 import argparse
-import json
 import subprocess
 import sys
 import tempfile
@@ -94,10 +93,7 @@ def main() -> int:
         lines.append(f"| 3 x {size} rgb8 @ 30 Hz | {args.episodes} | {r['frames']} | {r['seconds']:.1f} | "
                      f"**{r['frames'] / r['seconds']:.1f}** | **{100 * r['encode_seconds'] / r['seconds']:.0f} %** "
                      f"({r['videos']} videos, {r['encode_seconds']:.1f} s) |")
-    print("\n".join(lines))
-    if args.json:
-        args.json.write_text(json.dumps(results, indent=2))
-    return 0
+    return bench_common.report(lines, results, args.json)
 
 
 if __name__ == "__main__":

@@ -78,10 +78,7 @@ def main() -> int:
             lines.append(f"|  failed: episode {failure['episode']} | cube x={failure['cube'][0]:.3f} y={failure['cube'][1]:.3f} "
                          f"yaw={failure['cube'][3]:.2f} | {failure['note']} | | |")
         print(f"{label}: {result['successes']}/{result['episodes']}", file=sys.stderr)
-    print("\n".join(lines))
-    if args.json:
-        args.json.write_text(json.dumps(runs, indent=2))
-    return 0
+    return bench_common.report(lines, runs, args.json)
 
 
 if __name__ == "__main__":

@@ -171,10 +171,7 @@ def main() -> int:
                        ("rust_rate500", "Rust client, node at 500 Hz"), ("rclpy_rate500", "rclpy client, node at 500 Hz")):
         result = results["latency"][key]
         lines.append(f"| {label} | {us(result, 'p50'):.0f} | {us(result, 'p99'):.0f} | {us(result, 'p50') / us(base, 'p50'):.2f} |")
-    print("\n".join(lines))
-    if args.json:
-        args.json.write_text(json.dumps(results, indent=2))
-    return 0
+    return bench_common.report(lines, results, args.json)
 
 
 if __name__ == "__main__":

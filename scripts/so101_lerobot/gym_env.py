@@ -30,8 +30,6 @@ from .messages import joint_positions, rgb_image
 from .paths import node_binary, node_environment
 from .units import JOINT_LIMITS, JOINT_NAMES
 
-LIMITS = JOINT_LIMITS
-
 
 class So101SimEnv(gym.Env):
     metadata = {"render_modes": []}
@@ -45,7 +43,7 @@ class So101SimEnv(gym.Env):
         from std_msgs.msg import Bool, Float64
         from std_srvs.srv import Trigger
 
-        self.action_space = spaces.Box(LIMITS[:, 0].astype(np.float32), LIMITS[:, 1].astype(np.float32), dtype=np.float32)
+        self.action_space = spaces.Box(JOINT_LIMITS[:, 0].astype(np.float32), JOINT_LIMITS[:, 1].astype(np.float32), dtype=np.float32)
         state_space = spaces.Box(-np.inf, np.inf, shape=(19,), dtype=np.float32)
         self._cameras = dict(cameras or {})
         if self._cameras:
@@ -176,7 +174,7 @@ class So101SimEnv(gym.Env):
         action = np.asarray(action, dtype=np.float64)
         if action.shape != (6,) or not np.all(np.isfinite(action)):
             raise ValueError(f"an action is six finite joint targets, not {action}")
-        action = np.clip(action, LIMITS[:, 0], LIMITS[:, 1])
+        action = np.clip(action, JOINT_LIMITS[:, 0], JOINT_LIMITS[:, 1])
         counts = dict(self._counts)
         self._commands.publish(self._JointState(name=JOINT_NAMES, position=[float(v) for v in action]))
         self._sent += 1

@@ -14,6 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
+from .rclpy_wait import spin_until
 from .units import JOINT_NAMES, radians_from_lerobot
 
 
@@ -71,22 +72,19 @@ def main(argv: list[str] | None = None) -> int:
     latest: dict = {}
     node.create_subscription(JointState, f"{prefix}/joint_states", lambda m: latest.__setitem__("state", m), 10)
 
-    def spin_until(predicate, timeout: float, what: str):
-        deadline = time.monotonic() + timeout
-        while not predicate():
-            if time.monotonic() > deadline:
-                raise SystemExit(f"so101-replay: no {what} within {timeout:.0f} s (is the arm's node running?)")
-            rclpy.spin_once(node, timeout_sec=0.05)
+    def wait_for(predicate, timeout: float, what: str):
+        if not spin_until(node, predicate, timeout):
+            raise SystemExit(f"so101-replay: no {what} within {timeout:.0f} s (is the arm's node running?)")
 
     try:
         if args.reset:
             client = node.create_client(Trigger, f"{prefix}/sim/reset")
-            spin_until(client.service_is_ready, 20.0, "/sim/reset service")
+            wait_for(client.service_is_ready, 20.0, "/sim/reset service")
             future = client.call_async(Trigger.Request())
-            spin_until(future.done, 10.0, "/sim/reset answer")
+            wait_for(future.done, 10.0, "/sim/reset answer")
             latest.clear()
-        spin_until(lambda: "state" in latest, 20.0, "/joint_states")
-        spin_until(lambda: publisher.get_subscription_count() > 0, 20.0, "subscriber of /joint_commands")
+        wait_for(lambda: "state" in latest, 20.0, "/joint_states")
+        wait_for(lambda: publisher.get_subscription_count() > 0, 20.0, "subscriber of /joint_commands")
         positions = dict(zip(latest["state"].name, latest["state"].position))
         start = np.array([positions[name] for name in JOINT_NAMES])
 

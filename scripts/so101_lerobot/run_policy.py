@@ -27,6 +27,7 @@ import numpy as np
 
 from .messages import joint_positions, rgb_image
 from .policy import PolicyError, StackPolicy
+from .rclpy_wait import spin_until
 from .units import JOINT_LIMITS, JOINT_NAMES
 
 DEFAULT_TASK = "put the cube in the bin"
@@ -81,24 +82,21 @@ def run_live(args, policy: StackPolicy) -> int:
     try:
         if args.reset:
             client = node.create_client(Trigger, f"{prefix}/sim/reset")
-            if not client.wait_for_service(timeout_sec=20.0):
+            if not spin_until(node, client.service_is_ready, 20.0):
                 raise SystemExit(f"so101-run-policy: no {prefix}/sim/reset service within 20 s")
             future = client.call_async(Trigger.Request())
-            rclpy.spin_until_future_complete(node, future, timeout_sec=10.0)
-            if not future.done() or not future.result().success:
+            if not spin_until(node, future.done, 10.0) or not future.result().success:
                 raise SystemExit(f"so101-run-policy: {prefix}/sim/reset did not succeed")
         deadline = time.monotonic() + args.startup_timeout
         # The arm's node must hear the first command: wait until it has matched the publisher.
-        while commands.get_subscription_count() == 0:
-            if time.monotonic() > deadline:
-                raise SystemExit(f"so101-run-policy: no subscriber of {prefix}/joint_commands within "
-                                 f"{args.startup_timeout:.0f} s (is the arm's node running?)")
-            rclpy.spin_once(node, timeout_sec=0.05)
-        while missing := inputs.stale(camera_names, args.max_age):
-            if time.monotonic() > deadline:
-                raise SystemExit(f"so101-run-policy: nothing from {', '.join(missing)} within {args.startup_timeout:.0f} s "
-                                 "(is the arm's node running, with these cameras?)")
-            rclpy.spin_once(node, timeout_sec=0.05)
+        if not spin_until(node, lambda: commands.get_subscription_count() > 0, args.startup_timeout):
+            raise SystemExit(f"so101-run-policy: no subscriber of {prefix}/joint_commands within "
+                             f"{args.startup_timeout:.0f} s (is the arm's node running?)")
+        remaining = max(0.0, deadline - time.monotonic())
+        if not spin_until(node, lambda: not inputs.stale(camera_names, args.max_age), remaining):
+            missing = inputs.stale(camera_names, args.max_age)
+            raise SystemExit(f"so101-run-policy: nothing from {', '.join(missing)} within {args.startup_timeout:.0f} s "
+                             "(is the arm's node running, with these cameras?)")
         # One inference before the clock starts: the first one (allocation, kernels) is slow.
         policy.act(policy.observation(joint_positions(inputs.state[1]),
                                       {name: rgb_image(inputs.frames[name][1]) for name in camera_names}))

@@ -8,16 +8,10 @@ use nalgebra::{Isometry3, Quaternion, Translation3, UnitQuaternion, Vector3};
 use rerun::RecordingStreamResult;
 use so101_core::command::targets_from_joint_state;
 use so101_core::robot::{JointPositions, JOINT_COUNT};
-use so101_msgs::builtin_interfaces::Time;
 use so101_msgs::geometry_msgs::PoseStamped;
 use so101_msgs::sensor_msgs::{Image, JointState};
 
 use crate::rerun_log::SceneLog;
-
-/// Sim time of a stamp, s.
-pub fn seconds(stamp: &Time) -> f64 {
-    f64::from(stamp.sec) + f64::from(stamp.nanosec) * 1e-9
-}
 
 /// The packed RGB pixels of an rgb8 or bgr8 image; why not otherwise.
 pub fn rgb_pixels(image: &Image) -> Result<Vec<u8>, String> {
@@ -123,7 +117,7 @@ impl Bridge {
                 *known = Some(value);
             }
         }
-        let time = seconds(&message.header.stamp);
+        let time = message.header.stamp.as_secs_f64();
         self.now = Some(time);
         let Some(positions) = complete(&self.positions) else {
             return Ok(());
@@ -147,7 +141,7 @@ impl Bridge {
     }
 
     pub fn image(&mut self, camera: &str, message: &Image) -> RecordingStreamResult<()> {
-        let time = seconds(&message.header.stamp);
+        let time = message.header.stamp.as_secs_f64();
         if let Some(last) = self.last_image.get(camera) {
             // A stamp going backwards is a restarted sim: log again from there.
             if time >= *last && time - last < self.image_period - 1e-9 {
@@ -175,7 +169,7 @@ impl Bridge {
             self.counts.rejected += 1;
             return Ok(());
         };
-        self.at(seconds(&message.header.stamp));
+        self.at(message.header.stamp.as_secs_f64());
         self.counts.poses += 1;
         self.log.cube(&pose)
     }
