@@ -6,7 +6,7 @@ use std::{path::Path, time::Duration};
 use so101_core::robot::{JOINT_COUNT, JOINT_NAMES};
 
 use crate::{
-    bus::{BusConfig, BusError, SerialTransport, ServoBus},
+    bus::{BusConfig, BusError, Connector, SerialTransport, ServoBus, Transport},
     calibration::{ArmCalibration, ArmRole, MotorCalibration},
     protocol::registers::{self, Register, STS3215_MODEL},
 };
@@ -23,7 +23,7 @@ pub enum ArmError {
     #[error("cannot open serial port {path}: {source}")]
     Open {
         path: String,
-        source: serialport::Error,
+        source: std::io::Error,
     },
     #[error("{joint} (servo id {id}) does not answer: {source}. Check power, cabling, the id (`scan`) and the baud rate")]
     NoServo {
@@ -37,8 +37,8 @@ pub enum ArmError {
         id: u8,
         model: i32,
     },
-    #[error("the servos' EPROM calibration differs from the calibration file: these are not the servos that were connected (recalibrated or swapped?). Restart the driver to configure them")]
-    CalibrationChanged,
+    #[error("the servos' EPROM calibration differs from the calibration file ({}): not the arm this file belongs to (swapped, or recalibrated elsewhere?). Nothing was written; torque is off. Plug in the arm that matches, calibrate this one, or start the driver with --write-calibration to write the file's values into these servos", .differences.join("; "))]
+    CalibrationDiffers { differences: Vec<String> },
     #[error(transparent)]
     Bus(#[from] BusError),
 }
@@ -79,23 +79,58 @@ pub struct ArmSettings {
 pub fn open_bus(path: &Path, config: BusConfig) -> Result<ServoBus, ArmError> {
     let transport = SerialTransport::open(path, config.baud).map_err(|source| ArmError::Open {
         path: path.display().to_string(),
+        source: source.into(),
+    })?;
+    Ok(ServoBus::new(transport, config))
+}
+
+/// Opens a bus through `connector`.
+pub fn connect_bus<C: Connector>(
+    connector: &mut C,
+    config: BusConfig,
+) -> Result<ServoBus<C::Transport>, ArmError> {
+    let transport = connector.open().map_err(|source| ArmError::Open {
+        path: connector.describe(),
         source,
     })?;
     Ok(ServoBus::new(transport, config))
 }
 
-/// Torque off on every servo that can hear the port, without knowing or asking them: opens the
-/// port and broadcasts Torque_Enable = 0 (twice, nobody acknowledges a broadcast). For the way
-/// out when the arm is not connected properly.
-pub fn broadcast_torque_off(path: &Path, config: BusConfig) -> Result<(), ArmError> {
-    let mut bus = open_bus(path, config)?;
-    bus.broadcast_write(registers::TORQUE_ENABLE, 0)?;
-    bus.broadcast_write(registers::TORQUE_ENABLE, 0)?;
-    Ok(())
+/// Torque_Enable = 0 to every servo that can hear the bus, without knowing or asking them
+/// (twice: nobody acknowledges a broadcast, so a lost one would go unnoticed).
+pub fn broadcast_torque_off<T: Transport>(bus: &mut ServoBus<T>) -> Result<(), BusError> {
+    let first = bus.broadcast_write(registers::TORQUE_ENABLE, 0);
+    let second = bus.broadcast_write(registers::TORQUE_ENABLE, 0);
+    first.or(second)
+}
+
+/// Opens the port afresh and broadcasts torque off: the way out when the arm is not connected.
+pub fn reopen_and_broadcast_torque_off<C: Connector>(
+    connector: &mut C,
+    config: BusConfig,
+) -> Result<(), ArmError> {
+    let mut bus = connect_bus(connector, config)?;
+    Ok(broadcast_torque_off(&mut bus)?)
+}
+
+/// What a torque-off reached: the servos that acknowledged it one by one, and whether the
+/// broadcast for the others went out.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct TorqueOffReport {
+    /// Servos that did not acknowledge their own Torque_Enable = 0.
+    pub unacknowledged: Vec<u8>,
+    /// The broadcast to them could not be sent either (the port is gone).
+    pub broadcast_failed: bool,
+}
+
+impl TorqueOffReport {
+    pub fn confirmed(&self) -> bool {
+        self.unacknowledged.is_empty()
+    }
 }
 
 /// Pings servo `id` and reads its model and firmware.
-pub fn identify(bus: &mut ServoBus, id: u8) -> Result<ServoInfo, BusError> {
+pub fn identify<T: Transport>(bus: &mut ServoBus<T>, id: u8) -> Result<ServoInfo, BusError> {
     bus.ping(id)?;
     let model = bus.read(id, registers::MODEL_NUMBER)?;
     let major = bus.read(id, registers::FIRMWARE_MAJOR_VERSION)?;
@@ -108,8 +143,8 @@ pub fn identify(bus: &mut ServoBus, id: u8) -> Result<ServoInfo, BusError> {
 }
 
 /// Writes `value` only where the servo holds something else (EPROM cells wear out).
-pub fn ensure(
-    bus: &mut ServoBus,
+pub fn ensure<T: Transport>(
+    bus: &mut ServoBus<T>,
     id: u8,
     register: Register,
     value: i32,
@@ -123,8 +158,8 @@ pub fn ensure(
 
 /// Writes a motor's calibration into its EPROM (Homing_Offset, position limits); the caller
 /// unlocks the EPROM first.
-pub fn write_motor_calibration(
-    bus: &mut ServoBus,
+pub fn write_motor_calibration<T: Transport>(
+    bus: &mut ServoBus<T>,
     motor: &MotorCalibration,
 ) -> Result<bool, BusError> {
     let mut changed = ensure(bus, motor.id, registers::HOMING_OFFSET, motor.homing_offset)?;
@@ -143,50 +178,68 @@ pub fn write_motor_calibration(
     Ok(changed)
 }
 
+/// Whether the driver may bring the servos' EPROM calibration in line with the file.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum CalibrationWrite {
+    /// The user asked for it (`--write-calibration`, or the calibration tool).
+    Allowed,
+    /// Servos whose EPROM calibration differs are refused, never overwritten.
+    Refused,
+}
+
 /// The SO-101 on an open, configured bus.
-pub struct Arm {
-    pub bus: ServoBus,
+pub struct Arm<T: Transport = SerialTransport> {
+    pub bus: ServoBus<T>,
     pub calibration: ArmCalibration,
     pub servos: Vec<ServoInfo>,
     ids: [u8; JOINT_COUNT],
 }
 
-impl Arm {
-    /// Opens the port, finds the six servos, configures them and brings their EPROM calibration in
-    /// line with `calibration`. Torque is off afterwards.
+impl Arm<SerialTransport> {
+    /// Opens the serial port and connects (see [`Arm::connect_on`]).
     pub fn connect(
         port: &Path,
         settings: &ArmSettings,
         calibration: ArmCalibration,
+        write: CalibrationWrite,
     ) -> Result<Self, ArmError> {
-        let mut arm = Self::find(port, settings, calibration)?;
+        Arm::connect_on(open_bus(port, settings.bus)?, settings, calibration, write)
+    }
+}
+
+impl<T: Transport> Arm<T> {
+    /// Finds the six servos on `bus`, checks their EPROM calibration against `calibration`
+    /// (written only when `write` allows it), and configures them. Torque is off afterwards.
+    pub fn connect_on(
+        bus: ServoBus<T>,
+        settings: &ArmSettings,
+        calibration: ArmCalibration,
+        write: CalibrationWrite,
+    ) -> Result<Self, ArmError> {
+        let mut arm = Self::find(bus, calibration)?;
+        let differences = arm.calibration_differences()?;
+        if !differences.is_empty() && write == CalibrationWrite::Refused {
+            arm.torque_off_everywhere();
+            return Err(ArmError::CalibrationDiffers { differences });
+        }
         arm.configure(settings)?;
         Ok(arm)
     }
 
-    /// Reconnects after the adapter came back, without touching torque: the servos kept their
-    /// power, so an arm holding a pose keeps holding it. Settings that live in RAM are rewritten
-    /// (a power cycle resets them). An EPROM calibration that differs means these are not the
-    /// servos we knew: refused, never overwritten behind the user's back.
-    pub fn reattach(
-        port: &Path,
+    /// Reconnects after the link was lost, without writing any EPROM: servos whose calibration
+    /// differs from the file are not the arm we knew (another arm was plugged in) and are refused
+    /// with their torque off. Settings that live in RAM are rewritten (a power cycle resets them).
+    /// Torque is left to the caller.
+    pub fn reattach_on(
+        bus: ServoBus<T>,
         settings: &ArmSettings,
         calibration: ArmCalibration,
     ) -> Result<Self, ArmError> {
-        let mut arm = Self::find(port, settings, calibration)?;
-        let mut same = true;
-        for motor in arm.calibration.motors {
-            let bus = &mut arm.bus;
-            same &= bus.read(motor.id, registers::HOMING_OFFSET)? == motor.homing_offset
-                && bus.read(motor.id, registers::MIN_POSITION_LIMIT)? == motor.range_min
-                && bus.read(motor.id, registers::MAX_POSITION_LIMIT)? == motor.range_max;
-        }
-        if !same {
-            tracing::warn!(
-                "after reconnecting, the servos' calibration differs: configuring them again"
-            );
-            arm.configure(settings)?;
-            return Ok(arm);
+        let mut arm = Self::find(bus, calibration)?;
+        let differences = arm.calibration_differences()?;
+        if !differences.is_empty() {
+            arm.torque_off_everywhere();
+            return Err(ArmError::CalibrationDiffers { differences });
         }
         for id in arm.ids {
             arm.bus.write(id, registers::ACCELERATION, 254)?;
@@ -200,12 +253,7 @@ impl Arm {
         Ok(arm)
     }
 
-    fn find(
-        port: &Path,
-        settings: &ArmSettings,
-        calibration: ArmCalibration,
-    ) -> Result<Self, ArmError> {
-        let mut bus = open_bus(port, settings.bus)?;
+    fn find(mut bus: ServoBus<T>, calibration: ArmCalibration) -> Result<Self, ArmError> {
         let ids = calibration.ids();
         let mut servos = Vec::with_capacity(JOINT_COUNT);
         for (joint, id) in ids.iter().enumerate() {
@@ -238,6 +286,46 @@ impl Arm {
         })
     }
 
+    /// Where the servos' EPROM calibration (Homing_Offset, position limits) differs from the
+    /// file, in words; empty when it matches.
+    pub fn calibration_differences(&mut self) -> Result<Vec<String>, BusError> {
+        let mut differences = Vec::new();
+        for (joint, motor) in self.calibration.motors.iter().enumerate() {
+            for (register, expected) in [
+                (registers::HOMING_OFFSET, motor.homing_offset),
+                (registers::MIN_POSITION_LIMIT, motor.range_min),
+                (registers::MAX_POSITION_LIMIT, motor.range_max),
+            ] {
+                let found = self.bus.read(motor.id, register)?;
+                if found != expected {
+                    differences.push(format!(
+                        "{} {} is {found}, the file says {expected}",
+                        JOINT_NAMES[joint], register.name
+                    ));
+                }
+            }
+        }
+        Ok(differences)
+    }
+
+    /// Torque off on every servo whatever fails: each one told and acknowledged in turn (one that
+    /// does not answer does not stop the others), then a broadcast for any that did not confirm.
+    pub fn torque_off_everywhere(&mut self) -> TorqueOffReport {
+        let mut unacknowledged = Vec::new();
+        for id in self.ids {
+            if let Err(error) = self.bus.write(id, registers::TORQUE_ENABLE, 0) {
+                tracing::warn!(id, %error, "torque off not acknowledged");
+                unacknowledged.push(id);
+            }
+        }
+        let broadcast_failed =
+            !unacknowledged.is_empty() && broadcast_torque_off(&mut self.bus).is_err();
+        TorqueOffReport {
+            unacknowledged,
+            broadcast_failed,
+        }
+    }
+
     pub fn ids(&self) -> &[u8; JOINT_COUNT] {
         &self.ids
     }
@@ -245,9 +333,18 @@ impl Arm {
     /// LeRobot's so101 set-up: answer at once, full acceleration, position mode, its PID gains,
     /// and a torque-limited gripper.
     fn configure(&mut self, settings: &ArmSettings) -> Result<(), BusError> {
+        // No servo is reconfigured while any of them may still hold torque.
+        let torque_off = self.torque_off_everywhere();
+        if let Some(&id) = torque_off.unacknowledged.first() {
+            return Err(BusError::NotConfirmed {
+                id,
+                register: registers::TORQUE_ENABLE.name,
+                wrote: 0,
+                read: -1,
+            });
+        }
         for (joint, (&id, motor)) in self.ids.iter().zip(&self.calibration.motors).enumerate() {
             let bus = &mut self.bus;
-            bus.write(id, registers::TORQUE_ENABLE, 0)?;
             bus.write(id, registers::LOCK, 0)?;
             ensure(bus, id, registers::RETURN_DELAY_TIME, 0)?;
             ensure(bus, id, registers::MAXIMUM_ACCELERATION, 254)?;
@@ -276,7 +373,7 @@ impl Arm {
                 tracing::warn!(
                     joint = JOINT_NAMES[joint],
                     id,
-                    "the servo's EPROM calibration differed from the calibration file: wrote the file's values"
+                    "the servo's EPROM calibration differed from the calibration file: wrote the file's values (--write-calibration)"
                 );
             }
             bus.write(id, registers::LOCK, 1)?;
@@ -306,11 +403,11 @@ impl Arm {
         self.bus.sync_write(registers::GOAL_POSITION, &entries)
     }
 
-    /// Torque on or off on every servo, each acknowledged.
-    pub fn set_torque(&mut self, on: bool) -> Result<(), BusError> {
+    /// Torque on on every servo, each acknowledged; stops at the first that fails (the caller
+    /// then turns torque off everywhere: the arm is never left half stiff).
+    pub fn torque_on(&mut self) -> Result<(), BusError> {
         for id in self.ids {
-            self.bus
-                .write(id, registers::TORQUE_ENABLE, i32::from(on))?;
+            self.bus.write(id, registers::TORQUE_ENABLE, 1)?;
         }
         Ok(())
     }

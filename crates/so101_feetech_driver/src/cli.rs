@@ -40,11 +40,11 @@ pub struct PortArgs {
     /// Serial port of the servo bus adapter (or the emulator's pty / symlink).
     #[arg(long, default_value = "/dev/ttyACM0")]
     pub port: PathBuf,
-    /// Baud rate of the bus.
-    #[arg(long, default_value_t = 1_000_000)]
+    /// Baud rate of the bus (one the STS3215 supports).
+    #[arg(long, default_value_t = 1_000_000, value_parser = parse_baud)]
     pub baud: u32,
-    /// Extra attempts after a transaction got no valid answer.
-    #[arg(long, default_value_t = 2)]
+    /// Extra attempts after a transaction got no valid answer (0 to 10).
+    #[arg(long, default_value_t = 2, value_parser = clap::value_parser!(u32).range(0..=10))]
     pub retries: u32,
     /// Milliseconds allowed for the adapter and the OS on top of the wire time of a transaction.
     #[arg(long, default_value_t = 10.0, value_parser = parse_positive_ms)]
@@ -108,9 +108,10 @@ pub struct RunArgs {
     /// Reads per second of velocity, load, voltage, temperature and current.
     #[arg(long, default_value_t = 10.0, value_parser = parse_telemetry_rate)]
     pub telemetry_rate: f64,
-    /// Largest distance (rad) a goal may be from the joint's present position (like LeRobot's
-    /// max_relative_target); bigger jumps are approached over several cycles.
-    #[arg(long, default_value_t = 0.1, value_parser = parse_positive)]
+    /// Largest distance (rad) a goal may be from the joint's present position and from the
+    /// previous goal (like LeRobot's max_relative_target); bigger jumps are approached over
+    /// several cycles. Above 0 and at most 0.5.
+    #[arg(long, default_value_t = 0.1, value_parser = parse_max_step)]
     pub max_step: f64,
     /// Seconds without a command after which the arm holds where it is; 0 turns the watchdog off.
     #[arg(long, default_value_t = 0.5, value_parser = parse_seconds)]
@@ -121,9 +122,14 @@ pub struct RunArgs {
     /// Start with torque off (enable later with the torque_enable service).
     #[arg(long)]
     pub start_torque_off: bool,
-    /// Leave torque on when the node exits (default: torque off, the arm goes limp).
+    /// Leave torque on when the node exits (default: torque off, the arm goes limp; also after a
+    /// panic or a second Ctrl-C).
     #[arg(long)]
     pub keep_torque_on_exit: bool,
+    /// At start, write the calibration file's Homing_Offset and position limits into servos whose
+    /// EPROM holds other values (default: refuse such servos, they may be another arm).
+    #[arg(long)]
+    pub write_calibration: bool,
     /// Seconds between reconnection attempts after the bus was lost.
     #[arg(long, default_value_t = 0.5, value_parser = parse_interval)]
     pub reconnect_interval: f64,
@@ -199,6 +205,31 @@ fn parse_rate(text: &str) -> Result<CycleRate, String> {
             "{text:?} is not \"max\" or a rate above 0 and at most 5000 Hz"
         )),
     }
+}
+
+fn parse_baud(text: &str) -> Result<u32, String> {
+    let rates = crate::tools::scan::BAUD_RATES.map(|(_, baud)| baud);
+    match text.parse::<u32>() {
+        Ok(baud) if rates.contains(&baud) => Ok(baud),
+        _ => Err(format!(
+            "{text:?} is not a baud rate both LeRobot and Feetech give the STS3215 ({rates:?})"
+        )),
+    }
+}
+
+/// Largest --max-step: 0.5 rad (~29 degrees) a cycle is already far beyond any servo's speed.
+pub const MAX_STEP_CEILING: f64 = 0.5;
+
+fn parse_max_step(text: &str) -> Result<f64, String> {
+    parse_positive(text).and_then(|step| {
+        if step <= MAX_STEP_CEILING {
+            Ok(step)
+        } else {
+            Err(format!(
+                "{text:?} rad is more than {MAX_STEP_CEILING} rad a cycle: not a safety limit"
+            ))
+        }
+    })
 }
 
 fn parse_positive(text: &str) -> Result<f64, String> {

@@ -1,7 +1,9 @@
 //! What goal each servo gets in a cycle: the commanded target, clamped into the calibrated range,
-//! at most `max_step` away from where the joint is now (LeRobot's max_relative_target), and held
-//! in place when commands stop coming (a crashed teleop must not leave the arm chasing an old
-//! target). Pure logic; the control loop feeds it measured positions and the clock.
+//! at most `max_step` away from where the joint is now (LeRobot's max_relative_target) and from
+//! the previous goal, and held in place when commands stop coming (a crashed teleop must not leave
+//! the arm chasing an old target). Which readings may be the base of a goal at all
+//! ([`ReadingFilter`]), and when torque may come on ([`torque_on_refusal`]). Pure logic; the
+//! control loop feeds it measured positions and the clock.
 
 use std::time::{Duration, Instant};
 
@@ -27,6 +29,11 @@ pub struct SafetyCounters {
     pub limited_steps: u64,
     /// Times the watchdog made the arm hold.
     pub watchdog_holds: u64,
+    /// Goals held at the previous one because no goal was within `max_step` of both the joint
+    /// and its range (the joint was pushed far outside its range with torque on).
+    pub held_out_of_range: u64,
+    /// Readings that jumped further than a servo can move in the time since the last one.
+    pub implausible_readings: u64,
 }
 
 pub struct GoalShaper {
@@ -34,6 +41,8 @@ pub struct GoalShaper {
     limits: [JointLimit; JOINT_COUNT],
     /// Where the arm should go; `None` until the first hold or command.
     targets: Option<JointPositions>,
+    /// The goals last written; `None` until the first, and after torque was off.
+    last_goals: Option<JointPositions>,
     last_command: Option<Instant>,
     holding_for_watchdog: bool,
     pub counters: SafetyCounters,
@@ -46,15 +55,32 @@ impl GoalShaper {
             config,
             limits,
             targets: None,
+            last_goals: None,
             last_command: None,
             holding_for_watchdog: false,
             counters: SafetyCounters::default(),
         }
     }
 
-    /// Makes the present position the target (after connecting, enabling torque, reconnecting).
+    pub fn max_step(&self) -> f64 {
+        self.config.max_step
+    }
+
+    /// Changes `max_step` (a ceiling is the caller's to enforce).
+    pub fn set_max_step(&mut self, max_step: f64) {
+        self.config.max_step = max_step;
+    }
+
+    /// Makes the present position the target (after connecting, enabling torque, reconnecting);
+    /// the servos' goals are being set to it, so it is also the previous goal.
     pub fn hold(&mut self, present: &JointPositions) {
         self.targets = Some(self.clamped(present));
+        self.last_goals = Some(*present);
+    }
+
+    /// Torque went off: the servos' goals are no longer the ones written.
+    pub fn release(&mut self) {
+        self.last_goals = None;
     }
 
     pub fn targets(&self) -> Option<&JointPositions> {
@@ -100,15 +126,34 @@ impl GoalShaper {
                 self.clamped(present)
             }
         };
-        std::array::from_fn(|joint| {
-            let step = self.config.max_step;
-            let goal = targets[joint].clamp(present[joint] - step, present[joint] + step);
-            if goal != targets[joint] {
+        let step = self.config.max_step;
+        let previous = self.last_goals.unwrap_or(*present);
+        let goals = std::array::from_fn(|joint| {
+            let target = targets[joint];
+            let near_present = (present[joint] - step, present[joint] + step);
+            let near_previous = (previous[joint] - step, previous[joint] + step);
+            let range = (self.limits[joint].min, self.limits[joint].max);
+            // Where the joint is wins over where the previous goal was: when the two are further
+            // apart than two steps (a hand pushed the joint), the goal is the step towards it.
+            let mut allowed = intersect(near_present, near_previous)
+                .unwrap_or_else(|| towards(near_present, previous[joint]));
+            allowed = match intersect(allowed, range) {
+                Some(allowed) => allowed,
+                None => {
+                    // Outside the range by more than a step: no goal is both safe and in range
+                    // (the servo clamps goals to its limits), so the goal stays where it was.
+                    self.counters.held_out_of_range += 1;
+                    (previous[joint], previous[joint])
+                }
+            };
+            let goal = target.clamp(allowed.0, allowed.1);
+            if goal != target {
                 self.counters.limited_steps += 1;
             }
-            // A joint outside its range (pushed there by hand) is led back into it.
-            self.limits[joint].clamp(goal)
-        })
+            goal
+        });
+        self.last_goals = Some(goals);
+        goals
     }
 
     pub fn is_holding_for_watchdog(&self) -> bool {
@@ -118,6 +163,124 @@ impl GoalShaper {
     fn clamped(&self, positions: &JointPositions) -> JointPositions {
         std::array::from_fn(|joint| self.limits[joint].clamp(positions[joint]))
     }
+}
+
+/// The overlap of two closed intervals.
+fn intersect(a: (f64, f64), b: (f64, f64)) -> Option<(f64, f64)> {
+    let (low, high) = (a.0.max(b.0), a.1.min(b.1));
+    (low <= high).then_some((low, high))
+}
+
+/// The end of `interval` nearest to `value`, as a one-point interval.
+fn towards(interval: (f64, f64), value: f64) -> (f64, f64) {
+    let end = value.clamp(interval.0, interval.1);
+    (end, end)
+}
+
+/// Why torque must not come on with the joints where they are, if it must not: a joint further
+/// outside its calibrated range than one step would be pulled back in one jump, because the servo
+/// clamps every goal (the holding one too) to its position limits.
+pub fn torque_on_refusal(
+    present: &JointPositions,
+    limits: &[JointLimit; JOINT_COUNT],
+    max_step: f64,
+) -> Option<String> {
+    let outside: Vec<String> = (0..JOINT_COUNT)
+        .filter_map(|joint| {
+            let limit = limits[joint];
+            let below = limit.min - present[joint];
+            let above = present[joint] - limit.max;
+            let (distance, side) = if below > above {
+                (below, "below")
+            } else {
+                (above, "above")
+            };
+            (distance > max_step).then(|| {
+                format!(
+                    "{} is {distance:.3} rad {side} its calibrated range",
+                    so101_core::robot::JOINT_NAMES[joint]
+                )
+            })
+        })
+        .collect();
+    (!outside.is_empty()).then(|| {
+        format!(
+            "torque refused: {} (more than --max-step {max_step} rad): the servo would jump back into range. Move the joint into its range by hand (or recalibrate), then call /torque_enable true",
+            outside.join(", ")
+        )
+    })
+}
+
+/// Fastest a joint can really move (rad/s): the STS3215 turns ~0.15 s/60 deg unloaded at 12 V
+/// (~7 rad/s); a hand back-driving a limp joint stays below this too.
+pub const MAX_JOINT_SPEED: f64 = 20.0;
+/// Allowance on top of the speed bound for quantisation and reading jitter (rad, ~20 ticks).
+const READING_MARGIN: f64 = 0.03;
+
+/// Whether a reading can be the base of a goal: a joint that moved further since the last
+/// accepted reading than any joint can move in that time was misread (a flipped bit that still
+/// passed the checksum, a glitch). Two consecutive readings that agree are believed, though: the
+/// jump was real (the arm moved while the bus was down).
+#[derive(Debug, Default)]
+pub struct ReadingFilter {
+    accepted: Option<(JointPositions, Instant)>,
+    suspect: Option<(JointPositions, Instant)>,
+}
+
+impl ReadingFilter {
+    /// `Ok` when `reading` may be used; `Err` names the joint that jumped.
+    pub fn check(&mut self, reading: &JointPositions, now: Instant) -> Result<(), String> {
+        let Some((accepted, at)) = self.accepted else {
+            self.accept(reading, now);
+            return Ok(());
+        };
+        let jump = match implausible_jump(&accepted, at, reading, now) {
+            None => {
+                self.accept(reading, now);
+                return Ok(());
+            }
+            Some(jump) => jump,
+        };
+        if let Some((suspect, suspect_at)) = self.suspect {
+            if implausible_jump(&suspect, suspect_at, reading, now).is_none() {
+                self.accept(reading, now);
+                return Ok(());
+            }
+        }
+        self.suspect = Some((*reading, now));
+        Err(jump)
+    }
+
+    /// Forgets the history (after a reconnect the arm may be anywhere).
+    pub fn reset(&mut self) {
+        self.accepted = None;
+        self.suspect = None;
+    }
+
+    fn accept(&mut self, reading: &JointPositions, now: Instant) {
+        self.accepted = Some((*reading, now));
+        self.suspect = None;
+    }
+}
+
+fn implausible_jump(
+    before: &JointPositions,
+    then: Instant,
+    after: &JointPositions,
+    now: Instant,
+) -> Option<String> {
+    let bound = MAX_JOINT_SPEED * now.duration_since(then).as_secs_f64() + READING_MARGIN;
+    (0..JOINT_COUNT).find_map(|joint| {
+        let jump = (after[joint] - before[joint]).abs();
+        (jump > bound).then(|| {
+            format!(
+                "{} read {:.3} rad from {:.3} rad: a jump no servo makes in that time; not used",
+                so101_core::robot::JOINT_NAMES[joint],
+                after[joint],
+                before[joint]
+            )
+        })
+    })
 }
 
 #[cfg(test)]
@@ -163,7 +326,13 @@ mod tests {
         assert_eq!(goals[0], 0.0);
         assert_eq!(shaper.counters.clamped_targets, 1);
         assert_eq!(shaper.counters.limited_steps, 1);
+        let closer = [0.0, 0.0, 0.15, 0.0, 0.0, 0.0];
+        assert!((shaper.goals(&closer, now)[2] - 0.2).abs() < 1e-12);
         let closer = [0.0, 0.0, 0.95, 0.0, 0.0, 0.0];
+        // Pushed ahead of the previous goal (0.2): within a step of the joint, as near the
+        // previous goal as that allows.
+        assert!((shaper.goals(&closer, now)[2] - 0.85).abs() < 1e-12);
+        assert_eq!(shaper.goals(&closer, now)[2], 0.95);
         assert_eq!(shaper.goals(&closer, now)[2], 1.0);
     }
 
@@ -187,10 +356,85 @@ mod tests {
     }
 
     #[test]
-    fn a_joint_pushed_outside_its_range_is_led_back_in() {
+    fn a_joint_just_outside_its_range_is_led_back_in_within_one_step() {
         let mut shaper = shaper(None);
-        let outside = [1.3; JOINT_COUNT];
+        let outside = [1.05; JOINT_COUNT];
         let goals = shaper.goals(&outside, Instant::now());
-        assert!(goals.iter().all(|goal| *goal <= 1.0));
+        assert!(goals.iter().all(|goal| (*goal - 1.0).abs() < 1e-12));
+    }
+
+    #[test]
+    fn a_joint_far_outside_its_range_is_never_pulled_back_in_one_jump() {
+        // The regression: 70 ticks (0.107 rad) below the range with a 0.1 rad step went straight
+        // to the range's edge.
+        let mut shaper = shaper(None);
+        let mut present = [0.0; JOINT_COUNT];
+        present[1] = -1.107;
+        let now = Instant::now();
+        shaper.hold(&present);
+        for _ in 0..3 {
+            let goals = shaper.goals(&present, now);
+            assert!((goals[1] - present[1]).abs() <= 0.1 + 1e-12, "{goals:?}");
+        }
+        assert!(shaper.counters.held_out_of_range > 0);
+    }
+
+    #[test]
+    fn every_goal_is_within_a_step_of_the_joint_and_of_the_previous_goal() {
+        let mut shaper = shaper(None);
+        let now = Instant::now();
+        let mut present = [0.0; JOINT_COUNT];
+        shaper.command(&command("elbow_flex", 1.0), &present, now);
+        let mut previous = shaper.goals(&present, now);
+        // The joint reads as having moved back (sagging, a push): the goal follows at most one
+        // step from each.
+        for reading in [0.05, -0.05, 0.3, -0.2, 0.0] {
+            present[2] = reading;
+            let goals = shaper.goals(&present, now);
+            assert!((goals[2] - present[2]).abs() <= 0.1 + 1e-12);
+            if (present[2] - previous[2]).abs() <= 0.2 {
+                assert!((goals[2] - previous[2]).abs() <= 0.1 + 1e-12);
+            }
+            previous = goals;
+        }
+    }
+
+    #[test]
+    fn torque_on_is_refused_for_a_joint_more_than_a_step_outside_its_range() {
+        let limits = [JointLimit::new(-1.0, 1.0); JOINT_COUNT];
+        let mut present = [0.0; JOINT_COUNT];
+        assert!(torque_on_refusal(&present, &limits, 0.05).is_none());
+        present[1] = -1.04;
+        assert!(torque_on_refusal(&present, &limits, 0.05).is_none());
+        present[1] = -1.107;
+        let refusal = torque_on_refusal(&present, &limits, 0.05).unwrap();
+        assert!(
+            refusal.contains("shoulder_lift is 0.107 rad below"),
+            "{refusal}"
+        );
+    }
+
+    #[test]
+    fn a_single_implausible_reading_is_refused_and_a_confirmed_jump_believed() {
+        let mut filter = ReadingFilter::default();
+        let start = Instant::now();
+        let cycle = Duration::from_millis(5);
+        let calm = [0.0; JOINT_COUNT];
+        assert!(filter.check(&calm, start).is_ok());
+        let mut moved = calm;
+        moved[0] = 0.08; // 16 rad/s over 5 ms: fast but possible
+        assert!(filter.check(&moved, start + cycle).is_ok());
+        let mut glitch = moved;
+        glitch[3] = 1.5;
+        assert!(filter.check(&glitch, start + cycle * 2).is_err());
+        assert!(
+            filter.check(&moved, start + cycle * 3).is_ok(),
+            "back to normal"
+        );
+        // After a long silence the arm may be elsewhere, and two agreeing readings say so.
+        let mut elsewhere = moved;
+        elsewhere[2] = 1.0;
+        assert!(filter.check(&elsewhere, start + cycle * 4).is_err());
+        assert!(filter.check(&elsewhere, start + cycle * 5).is_ok());
     }
 }

@@ -11,10 +11,11 @@ use std::{
 };
 
 use so101_feetech_driver::{
-    arm::{open_bus, Arm, ArmSettings},
+    arm::{open_bus, Arm, ArmSettings, CalibrationWrite},
     bus::{BusConfig, BusError},
     calibration::{ArmCalibration, ArmRole},
     emulator::{Emulator, EmulatorConfig, SlotSnapshot, Timing},
+    protocol::registers,
     tools::{
         calibrate::{CalibrateError, Calibration},
         scan::{find_servos, probe_config},
@@ -82,7 +83,13 @@ fn connect_configures_the_servos_like_lerobot_and_writes_the_calibration() {
         timing: Timing::Realistic { baud: 1_000_000 },
         ..EmulatorConfig::default()
     });
-    let arm = Arm::connect(&bench.link, &settings(2), calibration()).unwrap();
+    let arm = Arm::connect(
+        &bench.link,
+        &settings(2),
+        calibration(),
+        CalibrationWrite::Allowed,
+    )
+    .unwrap();
     assert_eq!(arm.servos.len(), 6);
     assert!(arm.servos.iter().all(|servo| servo.model == 777));
     for (index, servo) in bench.emulator.snapshot().iter().enumerate() {
@@ -114,12 +121,18 @@ fn connect_configures_the_servos_like_lerobot_and_writes_the_calibration() {
 #[test]
 fn goals_written_with_torque_on_move_the_servos() {
     let bench = emulator(EmulatorConfig::default());
-    let mut arm = Arm::connect(&bench.link, &settings(2), calibration()).unwrap();
+    let mut arm = Arm::connect(
+        &bench.link,
+        &settings(2),
+        calibration(),
+        CalibrationWrite::Allowed,
+    )
+    .unwrap();
     let start = arm.read_positions().unwrap();
     // The servo subtracts its homing offset: the shaft at 2048 reads 2048 - 100 on shoulder_pan.
     assert_eq!(start[0], 2048 - 100);
     assert_eq!(start[1], 2048 + 200);
-    arm.set_torque(true).unwrap();
+    arm.torque_on().unwrap();
     let goals = [1500, 2500, 1800, 2200, 3000, 2900];
     arm.write_goals(&goals).unwrap();
     let deadline = Instant::now() + Duration::from_secs(3);
@@ -138,7 +151,7 @@ fn goals_written_with_torque_on_move_the_servos() {
     assert!(telemetry
         .iter()
         .all(|t| t.voltage > 5.0 && t.temperature > 0));
-    arm.set_torque(false).unwrap();
+    assert!(arm.torque_off_everywhere().confirmed());
     assert!(bench
         .emulator
         .snapshot()
@@ -152,7 +165,13 @@ fn lost_replies_are_retried_and_counted() {
         seed: 7,
         ..EmulatorConfig::default()
     });
-    let mut arm = Arm::connect(&bench.link, &settings(3), calibration()).unwrap();
+    let mut arm = Arm::connect(
+        &bench.link,
+        &settings(3),
+        calibration(),
+        CalibrationWrite::Allowed,
+    )
+    .unwrap();
     control(&bench, "drop 0.05");
     let mut failures = 0;
     for _ in 0..200 {
@@ -173,7 +192,13 @@ fn lost_replies_are_retried_and_counted() {
 #[test]
 fn no_answer_at_all_fails_after_the_retries_and_names_the_servos() {
     let bench = emulator(EmulatorConfig::default());
-    let mut arm = Arm::connect(&bench.link, &settings(1), calibration()).unwrap();
+    let mut arm = Arm::connect(
+        &bench.link,
+        &settings(1),
+        calibration(),
+        CalibrationWrite::Allowed,
+    )
+    .unwrap();
     control(&bench, "drop 1");
     match arm.read_positions() {
         Err(BusError::NoAnswer {
@@ -194,7 +219,13 @@ fn no_answer_at_all_fails_after_the_retries_and_names_the_servos() {
 #[test]
 fn a_silent_servo_is_named_and_the_others_still_answer_next_time() {
     let bench = emulator(EmulatorConfig::default());
-    let mut arm = Arm::connect(&bench.link, &settings(1), calibration()).unwrap();
+    let mut arm = Arm::connect(
+        &bench.link,
+        &settings(1),
+        calibration(),
+        CalibrationWrite::Allowed,
+    )
+    .unwrap();
     control(&bench, "silent 3 on");
     match arm.read_positions() {
         Err(BusError::NoAnswer { missing, .. }) => assert_eq!(missing, [3]),
@@ -210,7 +241,13 @@ fn corrupted_replies_are_detected_never_decoded() {
         seed: 3,
         ..EmulatorConfig::default()
     });
-    let mut arm = Arm::connect(&bench.link, &settings(1), calibration()).unwrap();
+    let mut arm = Arm::connect(
+        &bench.link,
+        &settings(1),
+        calibration(),
+        CalibrationWrite::Allowed,
+    )
+    .unwrap();
     let good = arm.read_positions().unwrap();
     control(&bench, "corrupt 1");
     assert!(matches!(
@@ -230,7 +267,13 @@ fn corrupted_replies_are_detected_never_decoded() {
 #[test]
 fn garbage_bytes_and_late_replies_do_not_desynchronise_the_bus() {
     let bench = emulator(EmulatorConfig::default());
-    let mut arm = Arm::connect(&bench.link, &settings(1), calibration()).unwrap();
+    let mut arm = Arm::connect(
+        &bench.link,
+        &settings(1),
+        calibration(),
+        CalibrationWrite::Allowed,
+    )
+    .unwrap();
     let good = arm.read_positions().unwrap();
     control(&bench, "garbage 40");
     assert_eq!(arm.read_positions().unwrap(), good);
@@ -246,8 +289,14 @@ fn garbage_bytes_and_late_replies_do_not_desynchronise_the_bus() {
 #[test]
 fn an_unplugged_adapter_is_reported_and_reattached_without_dropping_torque() {
     let bench = emulator(EmulatorConfig::default());
-    let mut arm = Arm::connect(&bench.link, &settings(1), calibration()).unwrap();
-    arm.set_torque(true).unwrap();
+    let mut arm = Arm::connect(
+        &bench.link,
+        &settings(1),
+        calibration(),
+        CalibrationWrite::Allowed,
+    )
+    .unwrap();
+    arm.torque_on().unwrap();
     control(&bench, "hangup 0.5");
     let deadline = Instant::now() + Duration::from_secs(2);
     let error = loop {
@@ -260,7 +309,9 @@ fn an_unplugged_adapter_is_reported_and_reattached_without_dropping_torque() {
     drop(arm);
     let deadline = Instant::now() + Duration::from_secs(5);
     let mut arm = loop {
-        match Arm::reattach(&bench.link, &settings(1), calibration()) {
+        let attached = open_bus(&bench.link, settings(1).bus)
+            .and_then(|bus| Arm::reattach_on(bus, &settings(1), calibration()));
+        match attached {
             Ok(arm) => break arm,
             Err(_) if Instant::now() < deadline => std::thread::sleep(Duration::from_millis(100)),
             Err(error) => panic!("no reconnection: {error}"),
@@ -275,6 +326,56 @@ fn an_unplugged_adapter_is_reported_and_reattached_without_dropping_torque() {
             .all(|s| s.torque_enable == 1),
         "reattaching must not drop a holding arm"
     );
+}
+
+#[test]
+fn another_arm_after_a_hangup_is_refused_its_eprom_untouched_and_its_torque_off() {
+    let bench = emulator(EmulatorConfig::default());
+    let arm = Arm::connect(
+        &bench.link,
+        &settings(1),
+        calibration(),
+        CalibrationWrite::Allowed,
+    )
+    .unwrap();
+    drop(arm);
+    // Another arm is plugged in: factory calibration (offset 0, limits 0..4095), torque on.
+    let mut bus = open_bus(&bench.link, settings(1).bus).unwrap();
+    for id in 1..=6 {
+        for (register, value) in [
+            (registers::LOCK, 0),
+            (registers::HOMING_OFFSET, 0),
+            (registers::MIN_POSITION_LIMIT, 0),
+            (registers::MAX_POSITION_LIMIT, 4095),
+            (registers::LOCK, 1),
+            (registers::TORQUE_ENABLE, 1),
+        ] {
+            bus.write(id, register, value).unwrap();
+        }
+    }
+    drop(bus);
+    let before = bench.emulator.snapshot();
+    let bus = open_bus(&bench.link, settings(1).bus).unwrap();
+    let error = Arm::reattach_on(bus, &settings(1), calibration())
+        .err()
+        .expect("another arm must be refused");
+    assert!(error.to_string().contains("differs"), "{error}");
+    for (slot, (old, new)) in before.iter().zip(bench.emulator.snapshot()).enumerate() {
+        assert_eq!(new.torque_enable, 0, "slot {slot}: torque left on");
+        assert_eq!(
+            (
+                new.homing_offset,
+                new.min_position_limit,
+                new.max_position_limit
+            ),
+            (
+                old.homing_offset,
+                old.min_position_limit,
+                old.max_position_limit
+            ),
+            "slot {slot}: EPROM written"
+        );
+    }
 }
 
 #[test]

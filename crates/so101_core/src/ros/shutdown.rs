@@ -33,6 +33,12 @@ impl Shutdown {
 
     /// A handle triggered by SIGINT or SIGTERM. A second signal exits the process with status 130.
     pub fn on_signals() -> std::io::Result<Self> {
+        Self::on_signals_then(|| {})
+    }
+
+    /// Like [`Shutdown::on_signals`], with `last_words` said before a second signal ends the
+    /// process (a device left in a safe state when the clean shutdown is cut short).
+    pub fn on_signals_then(last_words: impl FnOnce() + Send + 'static) -> std::io::Result<Self> {
         let shutdown = Self::new();
         let mut signals = Signals::new([SIGINT, SIGTERM])?;
         let handle = shutdown.clone();
@@ -46,6 +52,7 @@ impl Shutdown {
                 }
                 if forever.next().is_some() {
                     tracing::warn!("second signal: exiting without cleanup");
+                    last_words();
                     std::process::exit(130);
                 }
             })?;

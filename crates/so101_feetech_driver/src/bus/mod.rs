@@ -4,7 +4,14 @@
 //! preceded by noise. Every transaction therefore starts by dropping stale bytes, waits for its
 //! answers only as long as the wire needs plus a slack for the adapter, and is retried a bounded
 //! number of times. Servo error bits are conditions to report, not failed transactions.
+//!
+//! Protocol 0 has no sequence numbers, so a late reply looks like any other. Replies are matched to
+//! their request by id and data length; after a servo missed an answer, its late reply is "owed",
+//! and the next read from it asks for a different length (one byte more, dropped afterwards), so
+//! the owed reply can never be taken as the answer to that read. An owed write acknowledgement (no
+//! data, nothing to vary) is waited for briefly before the next write or ping to that servo.
 
+mod owed;
 mod transport;
 
 use std::{
@@ -12,7 +19,8 @@ use std::{
     time::{Duration, Instant},
 };
 
-pub use transport::{usb_latency_timer_ms, SerialTransport, Transport};
+use owed::OwedReplies;
+pub use transport::{usb_latency_timer_ms, Connector, SerialConnector, SerialTransport, Transport};
 
 use crate::protocol::{
     encode_instruction,
@@ -62,6 +70,8 @@ pub struct BusStats {
     pub checksum_errors: u64,
     /// Bytes dropped because they were not part of a packet (noise, late answers).
     pub garbage_bytes: u64,
+    /// Late answers to earlier requests, recognised and discarded.
+    pub stale_replies: u64,
 }
 
 #[derive(Debug, thiserror::Error)]
@@ -74,6 +84,13 @@ pub enum BusError {
         missing: Vec<u8>,
         attempts: u32,
         timeout: Duration,
+    },
+    #[error("servo {id} did not take {register} = {wrote} (reads {read})")]
+    NotConfirmed {
+        id: u8,
+        register: &'static str,
+        wrote: i32,
+        read: i32,
     },
     #[error(transparent)]
     Protocol(#[from] ProtocolError),
@@ -91,6 +108,7 @@ impl BusStats {
             failures: self.failures + other.failures,
             checksum_errors: self.checksum_errors + other.checksum_errors,
             garbage_bytes: self.garbage_bytes + other.garbage_bytes,
+            stale_replies: self.stale_replies + other.stale_replies,
         }
     }
 }
@@ -121,6 +139,8 @@ pub struct ServoBus<T: Transport = SerialTransport> {
     servo_errors: [ServoErrors; 256],
     /// Set after a transaction that may have left bytes behind (a timeout: its late answers).
     may_have_stale_bytes: bool,
+    /// Answers that servos still owe to requests that timed out.
+    owed: OwedReplies,
 }
 
 impl<T: Transport> ServoBus<T> {
@@ -133,6 +153,7 @@ impl<T: Transport> ServoBus<T> {
             buffer: Box::new([0; 1024]),
             servo_errors: [ServoErrors::default(); 256],
             may_have_stale_bytes: true,
+            owed: OwedReplies::default(),
         }
     }
 
@@ -142,6 +163,10 @@ impl<T: Transport> ServoBus<T> {
 
     pub fn transport(&self) -> &T {
         &self.transport
+    }
+
+    pub fn transport_mut(&mut self) -> &mut T {
+        &mut self.transport
     }
 
     /// Once the servos were told to answer at once (Return_Delay_Time = 0), waits get shorter.
@@ -171,9 +196,15 @@ impl<T: Transport> ServoBus<T> {
     }
 
     pub fn read_bytes(&mut self, id: u8, address: u8, length: u8) -> Result<Vec<u8>, BusError> {
-        let instruction = Instruction::Read { address, length };
-        let mut replies = self.transact("READ", id, &instruction, &[id], usize::from(length))?;
-        Ok(replies.pop().map(|reply| reply.data).unwrap_or_default())
+        let asked = self.owed.distinct_length(address, length, &[id]);
+        let instruction = Instruction::Read {
+            address,
+            length: asked,
+        };
+        let mut replies = self.transact("READ", id, &instruction, &[id], usize::from(asked))?;
+        let mut data = replies.pop().map(|reply| reply.data).unwrap_or_default();
+        data.truncate(usize::from(length));
+        Ok(data)
     }
 
     pub fn read(&mut self, id: u8, register: Register) -> Result<i32, BusError> {
@@ -182,12 +213,29 @@ impl<T: Transport> ServoBus<T> {
     }
 
     /// Writes one register and waits for the servo's acknowledgement (Response_Status_Level 1).
+    /// While the servo owes a late acknowledgement, which could not be told from this one, the
+    /// write is confirmed by reading the register back instead.
     pub fn write(&mut self, id: u8, register: Register, value: i32) -> Result<(), BusError> {
         let instruction = Instruction::Write {
             address: register.address,
             data: register.encode(value)?,
         };
-        self.transact("WRITE", id, &instruction, &[id], 0)?;
+        if !self.owed.any_of(&[id], 0, Instant::now()) {
+            self.transact("WRITE", id, &instruction, &[id], 0)?;
+            return Ok(());
+        }
+        self.transact("WRITE", id, &instruction, &[], 0)?;
+        // This write's own acknowledgement is on its way too; the read below settles one of them.
+        self.owed.add(&[id], 0, Instant::now());
+        let read = self.read(id, register)?;
+        if read != value {
+            return Err(BusError::NotConfirmed {
+                id,
+                register: register.name,
+                wrote: value,
+                read,
+            });
+        }
         Ok(())
     }
 
@@ -227,18 +275,23 @@ impl<T: Transport> ServoBus<T> {
         length: u8,
         ids: &[u8],
     ) -> Result<Vec<Reply>, BusError> {
+        let asked = self.owed.distinct_length(address, length, ids);
         let instruction = Instruction::SyncRead {
             address,
-            length,
+            length: asked,
             ids: ids.to_vec(),
         };
-        self.transact(
+        let mut replies = self.transact(
             "SYNC_READ",
             BROADCAST_ID,
             &instruction,
             ids,
-            usize::from(length),
-        )
+            usize::from(asked),
+        )?;
+        for reply in &mut replies {
+            reply.data.truncate(usize::from(length));
+        }
+        Ok(replies)
     }
 
     /// One SYNC_READ of a register, decoded, in `ids` order.
@@ -311,6 +364,7 @@ impl<T: Transport> ServoBus<T> {
                 };
             self.stats.timeouts += 1;
             self.may_have_stale_bytes = true;
+            self.owed.add(&missing, reply_len, Instant::now());
             if attempts > self.config.retries {
                 self.stats.failures += 1;
                 return Err(BusError::NoAnswer {
@@ -345,9 +399,14 @@ impl<T: Transport> ServoBus<T> {
                 let Ok(status) = crate::protocol::decode_status(&packet) else {
                     continue;
                 };
+                let len = status.parameters.len();
+                if len != reply_len && self.owed.settle(status.id, len) {
+                    self.stats.stale_replies += 1;
+                    continue;
+                }
                 let slot = expect.iter().position(|id| *id == status.id);
                 match slot {
-                    Some(slot) if status.parameters.len() == reply_len => {
+                    Some(slot) if len == reply_len && answers[slot].is_none() => {
                         self.servo_errors[usize::from(status.id)] = status.errors;
                         answers[slot] = Some(Reply {
                             id: status.id,
@@ -392,8 +451,21 @@ impl<T: Transport> ServoBus<T> {
             }
             self.reader.push(&self.buffer[..count]);
         }
+        self.settle_buffered_replies();
         self.reader.clear();
         Ok(())
+    }
+
+    /// Counts the owed replies among the buffered packets (the rest is left for the caller).
+    fn settle_buffered_replies(&mut self) {
+        while let Some(frame) = self.reader.next_frame() {
+            let Ok(packet) = frame else { continue };
+            if let Ok(status) = crate::protocol::decode_status(&packet) {
+                if self.owed.settle(status.id, status.parameters.len()) {
+                    self.stats.stale_replies += 1;
+                }
+            }
+        }
     }
 }
 

@@ -14,6 +14,38 @@ pub trait Transport: Send {
     fn write_all(&mut self, bytes: &[u8]) -> io::Result<()>;
     /// Reads what is available, waiting at most until `deadline`; `Ok(0)` when nothing came.
     fn read_until(&mut self, buffer: &mut [u8], deadline: Instant) -> io::Result<usize>;
+    /// A second handle on the same line, for last words from a panic hook or the signal thread
+    /// (a broadcast torque off while the process dies); `None` where there is none.
+    fn emergency_writer(&self) -> Option<Box<dyn Write + Send>> {
+        None
+    }
+}
+
+/// Where transports come from: opened at start and again after the link was lost.
+pub trait Connector {
+    type Transport: Transport;
+    fn open(&mut self) -> io::Result<Self::Transport>;
+    /// The port, in words (logs, /diagnostics).
+    fn describe(&self) -> String;
+}
+
+/// A serial port by path.
+#[derive(Debug, Clone)]
+pub struct SerialConnector {
+    pub path: PathBuf,
+    pub baud: u32,
+}
+
+impl Connector for SerialConnector {
+    type Transport = SerialTransport;
+
+    fn open(&mut self) -> io::Result<SerialTransport> {
+        SerialTransport::open(&self.path, self.baud).map_err(io::Error::from)
+    }
+
+    fn describe(&self) -> String {
+        self.path.display().to_string()
+    }
 }
 
 /// A serial port opened with the bus's settings (8N1, no flow control, raw).
@@ -68,6 +100,11 @@ impl Transport for SerialTransport {
                 Err(error) => Err(error),
             };
         }
+    }
+
+    fn emergency_writer(&self) -> Option<Box<dyn Write + Send>> {
+        let port = self.port.try_clone_native().ok()?;
+        Some(Box::new(port))
     }
 }
 

@@ -4,10 +4,12 @@
 //! - `servo`: one servo's control table and shaft physics (pure).
 //! - `bus`: the servos on one bus, instruction semantics, faults and wire timing (pure).
 //! - `control`: the runtime control commands (`move 1 2048`, `drop 0.1`, `dump`, ...) (pure).
+//! - `in_process`: the bus as an in-process transport, for the driver's own tests (I/O-free).
 //! - `pty`: serving the bus on a pty, with hangups and a symlink that survives them (I/O).
 
 pub mod bus;
 pub mod control;
+pub mod in_process;
 pub mod pty;
 pub mod servo;
 
@@ -15,6 +17,7 @@ use std::path::PathBuf;
 
 pub use bus::{BusEmulator, Faults, Response, SlotSnapshot, SlotState, Timing};
 pub use control::{ControlCommand, ControlError};
+pub use in_process::{GoalAudit, InProcessBus, InProcessTransport};
 pub use pty::{Emulator, EmulatorConfig};
 pub use servo::ServoModel;
 

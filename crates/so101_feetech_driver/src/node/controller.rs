@@ -1,0 +1,701 @@
+//! The driver's state machine, without ROS: the link to the arm (up, or down and reconnecting),
+//! the torque the user asked for and the torque the servos have, and one control cycle (read,
+//! check, goals, write). Generic over where the bus comes from, so it runs on a serial port in
+//! the node and on the in-process emulator in its tests.
+//!
+//! Rules it keeps, whatever fails:
+//! - A goal is only computed from positions read in the same cycle, that passed the plausibility
+//!   checks; after a failed read nothing is written (the servos keep their last goal).
+//! - Torque off reaches every servo: each one told in turn, then a broadcast for any that did not
+//!   confirm; at exit, on request, when the link is lost and before any reconfiguration.
+//! - Torque comes on only holding where the joints are, and never for a joint so far outside its
+//!   range that the servo would jump back into it.
+//! - After a reconnect, servos whose EPROM calibration differs are refused, never written.
+
+use std::time::{Duration, Instant};
+
+use so101_core::{
+    command::PartialTargets,
+    robot::{JointLimit, JointPositions, JOINT_COUNT, JOINT_NAMES},
+};
+
+use super::{diagnostics::ServoReport, emergency};
+use crate::{
+    arm::{
+        connect_bus, reopen_and_broadcast_torque_off, Arm, ArmError, ArmSettings, CalibrationWrite,
+        Telemetry, TorqueOffReport,
+    },
+    bus::{BusError, BusStats, Connector, Transport},
+    calibration::ArmCalibration,
+    protocol::ServoErrors,
+    safety::{torque_on_refusal, GoalShaper, ReadingFilter, SafetyConfig, SafetyCounters},
+};
+
+/// How often a torque state that does not match the wish is retried.
+pub const TORQUE_RETRY: Duration = Duration::from_millis(500);
+/// A position further than this outside its calibrated range (ticks, ~18 degrees) is not a joint
+/// pushed by hand but a wrong calibration or a bad reading: no goal is computed from it.
+const IMPLAUSIBLE_MARGIN_TICKS: i32 = 200;
+/// Telemetry older than this is not used for joint velocities.
+const TELEMETRY_MAX_AGE: Duration = Duration::from_millis(500);
+
+/// How the controller behaves; the node fills it from its flags.
+#[derive(Debug, Clone)]
+pub struct ControllerConfig {
+    /// A leader arm: torque stays off, commands are not taken.
+    pub leader: bool,
+    pub safety: SafetyConfig,
+    /// Torque on once connected (not for a leader).
+    pub torque_at_start: bool,
+    /// Whether the calibration file may be written into the servos at start.
+    pub calibration_write: CalibrationWrite,
+    /// No good read for this long: the port is closed and the arm reconnected.
+    pub reopen_after: Duration,
+    pub reconnect_interval: Duration,
+    pub telemetry_period: Duration,
+    /// Broadcast torque off from a panic or a second signal (the node; not its tests).
+    pub last_words: bool,
+}
+
+/// What the user asked for and what the servos have.
+#[derive(Debug, Clone, Copy)]
+struct Torque {
+    wanted: bool,
+    /// On, and confirmed by every servo: only then are goals written.
+    on: bool,
+    /// A change failed part-way: the servos' state is not known until a retry succeeds.
+    uncertain: bool,
+    next_attempt: Instant,
+}
+
+enum Link<T: Transport> {
+    Up(Box<Arm<T>>),
+    Down { next_attempt: Instant },
+}
+
+/// Why torque is not what the user asked for.
+#[derive(Debug, Clone)]
+enum TorqueProblem {
+    /// A change failed; retried until it works.
+    Failed(String),
+    /// Refused or dropped for a reason the user must see to (a joint outside its range, an
+    /// overloaded servo); stays until the user asks again and it works.
+    NeedsUser(String),
+}
+
+impl TorqueProblem {
+    fn text(&self) -> &str {
+        match self {
+            Self::Failed(text) | Self::NeedsUser(text) => text,
+        }
+    }
+}
+
+/// Positions read in the current cycle.
+#[derive(Debug, Clone, Copy)]
+struct Present {
+    radians: JointPositions,
+    ticks: [i32; JOINT_COUNT],
+}
+
+/// What a cycle produced for the node to publish.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct CycleOutput {
+    /// Joint positions (rad), when they were read and plausible.
+    pub positions: Option<JointPositions>,
+    /// Joint velocities (rad/s) from fresh telemetry; empty when there is none.
+    pub velocities: Vec<f64>,
+}
+
+/// The controller's part of /diagnostics.
+#[derive(Debug, Clone)]
+pub struct ControllerStatus {
+    pub connected: bool,
+    pub problem: Option<String>,
+    pub torque_on: bool,
+    pub failed_cycles: u64,
+    pub reconnects: u64,
+    pub bus: BusStats,
+    pub safety: SafetyCounters,
+    pub servos: [ServoReport; JOINT_COUNT],
+}
+
+#[derive(Debug, thiserror::Error)]
+pub enum StartError {
+    #[error(transparent)]
+    Arm(#[from] ArmError),
+    #[error("cannot set the servos' torque at start: {0}")]
+    Torque(TorqueError),
+}
+
+#[derive(Debug, thiserror::Error)]
+pub enum TorqueError {
+    #[error(transparent)]
+    Bus(#[from] BusError),
+    #[error("{0}")]
+    Refused(String),
+    #[error("torque off not confirmed by servo(s) {0:?}")]
+    Unconfirmed(Vec<u8>),
+}
+
+pub struct Controller<C: Connector> {
+    config: ControllerConfig,
+    connector: C,
+    settings: ArmSettings,
+    calibration: ArmCalibration,
+    limits: [JointLimit; JOINT_COUNT],
+    link: Link<C::Transport>,
+    shaper: GoalShaper,
+    readings: ReadingFilter,
+    torque: Torque,
+    present: Option<Present>,
+    telemetry: Option<([Telemetry; JOINT_COUNT], Instant)>,
+    next_telemetry: Instant,
+    answering: [bool; JOINT_COUNT],
+    last_good_read: Instant,
+    failed_cycles: u64,
+    reconnects: u64,
+    /// What is wrong with the link or the readings; cleared by the next good read.
+    problem: Option<String>,
+    /// Why torque is not what the user asked for.
+    torque_problem: Option<TorqueProblem>,
+    /// Bus counters of earlier connections.
+    bus_totals: BusStats,
+}
+
+impl<C: Connector> Controller<C> {
+    /// Connects to the arm (the servos found, checked and configured) and brings torque to what
+    /// `config` asks. A torque-on refused for a joint outside its range is not an error: the
+    /// controller runs with torque off and says why.
+    pub fn start(
+        mut connector: C,
+        settings: ArmSettings,
+        calibration: ArmCalibration,
+        config: ControllerConfig,
+        now: Instant,
+    ) -> Result<Self, StartError> {
+        let bus = connect_bus(&mut connector, settings.bus)?;
+        let arm = Arm::connect_on(
+            bus,
+            &settings,
+            calibration.clone(),
+            config.calibration_write,
+        )?;
+        tracing::info!(port = %connector.describe(), servos = ?arm.servos, "arm connected");
+        let limits = calibration
+            .limits_in_radians()
+            .map(|(low, high)| JointLimit::new(low, high));
+        let mut controller = Self {
+            shaper: GoalShaper::new(config.safety, limits),
+            torque: Torque {
+                wanted: config.torque_at_start && !config.leader,
+                on: false,
+                uncertain: true,
+                next_attempt: now,
+            },
+            config,
+            connector,
+            settings,
+            calibration,
+            limits,
+            link: Link::Up(Box::new(arm)),
+            readings: ReadingFilter::default(),
+            present: None,
+            telemetry: None,
+            next_telemetry: now,
+            answering: [true; JOINT_COUNT],
+            last_good_read: now,
+            failed_cycles: 0,
+            reconnects: 0,
+            problem: None,
+            torque_problem: None,
+            bus_totals: BusStats::default(),
+        };
+        controller.arm_last_words();
+        match controller.apply_torque_wish() {
+            Ok(()) | Err(TorqueError::Refused(_)) => Ok(controller),
+            Err(error) => {
+                // Some servos may have taken torque on before the failure: none may stay stiff.
+                controller.torque.wanted = false;
+                controller.torque_off_everywhere();
+                Err(StartError::Torque(error))
+            }
+        }
+    }
+
+    /// One control cycle at `now`.
+    pub fn cycle(&mut self, now: Instant) -> CycleOutput {
+        if matches!(self.link, Link::Down { .. }) {
+            self.try_reconnect(now);
+            return CycleOutput::default();
+        }
+        self.reconcile_torque(now);
+        let positions = self.exchange(now);
+        if now >= self.next_telemetry && positions.is_some() {
+            self.next_telemetry = now + self.config.telemetry_period;
+            self.read_telemetry(now);
+        }
+        CycleOutput {
+            positions,
+            velocities: self.velocities(now),
+        }
+    }
+
+    /// A validated command; `false` when it cannot be taken (position unknown, or a leader).
+    pub fn command(&mut self, targets: &PartialTargets, now: Instant) -> bool {
+        match (&self.present, self.config.leader) {
+            (Some(present), false) => {
+                self.shaper.command(targets, &present.radians, now);
+                true
+            }
+            _ => false,
+        }
+    }
+
+    /// The /torque_enable service: success and a message in words.
+    pub fn request_torque(&mut self, on: bool) -> (bool, String) {
+        if on && self.config.leader {
+            return (
+                false,
+                "a leader arm keeps torque off (it is moved by hand)".to_owned(),
+            );
+        }
+        self.torque.wanted = on;
+        if let Link::Down { .. } = self.link {
+            if on {
+                return (
+                    false,
+                    "the arm is disconnected; torque will be on once it is back".to_owned(),
+                );
+            }
+            return match reopen_and_broadcast_torque_off(&mut self.connector, self.settings.bus) {
+                Ok(()) => (
+                    true,
+                    "the arm is disconnected: torque off was broadcast (unconfirmed)".to_owned(),
+                ),
+                Err(error) => (
+                    false,
+                    format!("the arm is disconnected and torque off could not be sent: {error}"),
+                ),
+            };
+        }
+        match self.apply_torque_wish() {
+            Ok(()) => {
+                self.torque_problem = None;
+                (true, format!("torque {}", if on { "on" } else { "off" }))
+            }
+            Err(TorqueError::Refused(reason)) => (false, reason),
+            Err(error) => (
+                false,
+                format!("torque change failed ({error}); retrying every {TORQUE_RETRY:?}"),
+            ),
+        }
+    }
+
+    /// Torque off on every servo that can hear it (unless `keep_torque_on`), for the way out.
+    pub fn shutdown(&mut self, keep_torque_on: bool) {
+        if keep_torque_on && !self.config.leader {
+            tracing::info!("torque left as it is (--keep-torque-on-exit)");
+        } else {
+            self.torque.wanted = false;
+            match self.torque_off_everywhere() {
+                Some(report) if report.confirmed() => tracing::info!("torque off"),
+                Some(report) => tracing::error!(
+                    unacknowledged = ?report.unacknowledged,
+                    broadcast_sent = !report.broadcast_failed,
+                    "torque off not confirmed by every servo on exit; broadcast to them"
+                ),
+                None => tracing::warn!("disconnected on exit: torque off was broadcast"),
+            }
+        }
+        emergency::set_line(None);
+    }
+
+    pub fn status(&self) -> ControllerStatus {
+        let (bus, errors) = match &self.link {
+            Link::Up(arm) => (
+                self.bus_totals.plus(arm.bus.stats()),
+                self.calibration.ids().map(|id| arm.bus.servo_errors(id)),
+            ),
+            Link::Down { .. } => (self.bus_totals, Default::default()),
+        };
+        let ids = self.calibration.ids();
+        let torque_problem = self.torque_problem.as_ref().map(TorqueProblem::text);
+        let problem = match (&self.problem, torque_problem) {
+            (Some(link), Some(torque)) => Some(format!("{link}; {torque}")),
+            (link, torque) => link.clone().or_else(|| torque.map(str::to_owned)),
+        };
+        ControllerStatus {
+            connected: matches!(self.link, Link::Up(_)),
+            problem,
+            torque_on: self.torque.on,
+            failed_cycles: self.failed_cycles,
+            reconnects: self.reconnects,
+            bus,
+            safety: self.shaper.counters,
+            servos: std::array::from_fn(|joint| ServoReport {
+                id: ids[joint],
+                answering: self.answering[joint],
+                errors: errors[joint],
+                position_ticks: self.present.map(|present| present.ticks[joint]),
+                telemetry: self.telemetry.map(|(telemetry, _)| telemetry[joint]),
+            }),
+        }
+    }
+
+    pub fn is_connected(&self) -> bool {
+        matches!(self.link, Link::Up(_))
+    }
+
+    /// The bus part of a cycle: read positions, check them, write goals computed from them.
+    fn exchange(&mut self, now: Instant) -> Option<JointPositions> {
+        let Link::Up(arm) = &mut self.link else {
+            return None;
+        };
+        let ticks = match arm.read_positions() {
+            Ok(ticks) => ticks,
+            Err(error) => {
+                self.failed_read();
+                self.bus_fault(error, now);
+                return None;
+            }
+        };
+        let checked = implausible(&self.calibration, &ticks, arm).map_or_else(
+            || {
+                let radians: JointPositions = std::array::from_fn(|joint| {
+                    self.calibration.radians_from_ticks(joint, ticks[joint])
+                });
+                self.readings.check(&radians, now).map(|()| radians)
+            },
+            Err,
+        );
+        let radians = match checked {
+            Ok(radians) => radians,
+            Err(problem) => {
+                self.shaper.counters.implausible_readings += 1;
+                self.failed_read();
+                self.report_problem(problem);
+                return None;
+            }
+        };
+        self.last_good_read = now;
+        self.answering = [true; JOINT_COUNT];
+        self.problem = None;
+        self.present = Some(Present { radians, ticks });
+        if self.torque.on {
+            if let Some(problem) = self.overloaded() {
+                self.drop_torque_after(problem);
+                return Some(radians);
+            }
+        }
+        // Goals first, the report after: the servos should not wait for the publisher.
+        if !self.config.leader && self.torque.on {
+            let goals = self.shaper.goals(&radians, now);
+            let goal_ticks = std::array::from_fn(|joint| {
+                self.calibration.ticks_from_radians(joint, goals[joint])
+            });
+            let Link::Up(arm) = &mut self.link else {
+                return Some(radians);
+            };
+            if let Err(error) = arm.write_goals(&goal_ticks) {
+                self.bus_fault(error, now);
+            }
+        }
+        Some(radians)
+    }
+
+    fn failed_read(&mut self) {
+        self.failed_cycles += 1;
+        self.present = None;
+    }
+
+    fn report_problem(&mut self, problem: String) {
+        if self.problem.as_deref() != Some(problem.as_str()) {
+            tracing::error!("{problem}");
+        }
+        self.problem = Some(problem);
+    }
+
+    /// A servo that reports overload has dropped its own torque (its protection): which, if any.
+    fn overloaded(&self) -> Option<String> {
+        let Link::Up(arm) = &self.link else {
+            return None;
+        };
+        self.calibration
+            .motors
+            .iter()
+            .enumerate()
+            .find(|(_, motor)| arm.bus.servo_errors(motor.id).0 & ServoErrors::OVERLOAD != 0)
+            .map(|(joint, motor)| {
+                format!(
+                    "torque off: {} (id {}) reports overload and dropped its own torque; torque is off on every servo. Clear the obstruction, then call /torque_enable true",
+                    JOINT_NAMES[joint], motor.id
+                )
+            })
+    }
+
+    /// A servo cut its torque by itself: the others follow (never a half-stiff arm), and the
+    /// user decides when to go on.
+    fn drop_torque_after(&mut self, problem: String) {
+        tracing::error!("{problem}");
+        self.torque_problem = Some(TorqueProblem::NeedsUser(problem));
+        self.torque.wanted = false;
+        if let Err(error) = self.apply_torque_wish() {
+            tracing::error!(%error, "torque off after an overload not confirmed");
+        }
+    }
+
+    /// Retries a torque state that does not match the wish (a failed change, a reconnect).
+    fn reconcile_torque(&mut self, now: Instant) {
+        let matches = self.torque.on == self.torque.wanted && !self.torque.uncertain;
+        if matches || now < self.torque.next_attempt {
+            return;
+        }
+        self.torque.next_attempt = now + TORQUE_RETRY;
+        if self.apply_torque_wish().is_ok() {
+            tracing::info!(on = self.torque.on, "torque state restored");
+        }
+    }
+
+    /// Brings the servos' torque in line with the wish. Torque on first makes the present
+    /// position the goal, so the arm does not jump to an old one.
+    fn apply_torque_wish(&mut self) -> Result<(), TorqueError> {
+        if !matches!(self.link, Link::Up(_)) {
+            return Ok(());
+        }
+        let result = if self.torque.wanted {
+            self.torque_on()
+        } else {
+            match self.torque_off_everywhere() {
+                Some(report) if report.confirmed() => Ok(()),
+                Some(report) => Err(TorqueError::Unconfirmed(report.unacknowledged)),
+                None => Ok(()),
+            }
+        };
+        match &result {
+            Ok(()) => {
+                self.torque.on = self.torque.wanted;
+                self.torque.uncertain = false;
+                if matches!(self.torque_problem, Some(TorqueProblem::Failed(_))) {
+                    self.torque_problem = None;
+                }
+            }
+            Err(TorqueError::Refused(reason)) => {
+                self.torque.on = false;
+                self.torque.uncertain = false;
+                tracing::error!("{reason}");
+                self.torque_problem = Some(TorqueProblem::NeedsUser(reason.clone()));
+            }
+            Err(error) => {
+                // Some servos may have switched: no goals until a retry confirms all of them.
+                self.torque.on = false;
+                self.torque.uncertain = true;
+                tracing::error!(%error, wanted = self.torque.wanted, "cannot change torque");
+                self.torque_problem = Some(TorqueProblem::Failed(format!(
+                    "torque change failed: {error}"
+                )));
+            }
+        }
+        result
+    }
+
+    fn torque_on(&mut self) -> Result<(), TorqueError> {
+        let Link::Up(arm) = &mut self.link else {
+            return Ok(());
+        };
+        let ticks = arm.read_positions()?;
+        if let Some(problem) = implausible(&self.calibration, &ticks, arm) {
+            return Err(TorqueError::Refused(format!("torque refused: {problem}")));
+        }
+        let present: JointPositions =
+            std::array::from_fn(|joint| self.calibration.radians_from_ticks(joint, ticks[joint]));
+        if let Some(refusal) = torque_on_refusal(&present, &self.limits, self.shaper.max_step()) {
+            // Sticky: the user moves the joint and asks again; torque never comes on by itself
+            // under a hand that is still at the arm.
+            self.torque.wanted = false;
+            self.torque_off_everywhere();
+            return Err(TorqueError::Refused(refusal));
+        }
+        self.shaper.hold(&present);
+        let held = self.shaper.targets().copied().unwrap_or(present);
+        let goals =
+            std::array::from_fn(|joint| self.calibration.ticks_from_radians(joint, held[joint]));
+        let Link::Up(arm) = &mut self.link else {
+            return Ok(());
+        };
+        let result = arm.write_goals(&goals).and_then(|()| arm.torque_on());
+        if let Err(error) = result {
+            // Never half stiff: the servos that took torque on give it up again.
+            self.torque_off_everywhere();
+            return Err(error.into());
+        }
+        Ok(())
+    }
+
+    /// Torque off on every servo whatever fails; `None` when the link is down (then a broadcast
+    /// on a freshly opened port was tried).
+    fn torque_off_everywhere(&mut self) -> Option<TorqueOffReport> {
+        self.shaper.release();
+        match &mut self.link {
+            Link::Up(arm) => {
+                let report = arm.torque_off_everywhere();
+                if report.broadcast_failed {
+                    // The port itself failed: a fresh one may still reach the servos.
+                    let _ = reopen_and_broadcast_torque_off(&mut self.connector, self.settings.bus);
+                }
+                Some(report)
+            }
+            Link::Down { .. } => {
+                if let Err(error) =
+                    reopen_and_broadcast_torque_off(&mut self.connector, self.settings.bus)
+                {
+                    tracing::debug!(%error, "torque off broadcast while disconnected failed");
+                }
+                None
+            }
+        }
+    }
+
+    fn read_telemetry(&mut self, now: Instant) {
+        let Link::Up(arm) = &mut self.link else {
+            return;
+        };
+        match arm.read_telemetry() {
+            Ok(telemetry) => self.telemetry = Some((telemetry, now)),
+            // Not fatal: positions are what the loop needs; a lost port shows up there too.
+            Err(error) if error.is_disconnected() => self.bus_fault(error, now),
+            Err(error) => tracing::debug!(%error, "telemetry read failed"),
+        }
+    }
+
+    fn velocities(&self, now: Instant) -> Vec<f64> {
+        match self.telemetry {
+            Some((telemetry, at)) if now.duration_since(at) <= TELEMETRY_MAX_AGE => (0
+                ..JOINT_COUNT)
+                .map(|joint| {
+                    self.calibration
+                        .radians_per_second(joint, telemetry[joint].velocity)
+                })
+                .collect(),
+            _ => Vec::new(),
+        }
+    }
+
+    fn bus_fault(&mut self, error: BusError, now: Instant) {
+        if let BusError::NoAnswer { missing, .. } = &error {
+            let ids = self.calibration.ids();
+            self.answering = std::array::from_fn(|joint| !missing.contains(&ids[joint]));
+            let joints: Vec<&str> = (0..JOINT_COUNT)
+                .filter(|joint| !self.answering[*joint])
+                .map(|joint| JOINT_NAMES[joint])
+                .collect();
+            self.problem = Some(format!(
+                "no answer from {} (ids {missing:?}): goals withheld",
+                joints.join(", ")
+            ));
+        } else {
+            self.problem = Some(error.to_string());
+        }
+        let silent_for = now.duration_since(self.last_good_read);
+        if error.is_disconnected() || silent_for > self.config.reopen_after {
+            tracing::error!(%error, silent_for = ?silent_for, "bus lost: torque off, reconnecting by itself");
+            self.disconnect(now, format!("bus lost ({error}); reconnecting"));
+        } else {
+            tracing::warn!("{}", self.problem.as_deref().unwrap_or(""));
+        }
+    }
+
+    /// The link is lost: torque off for every servo that can still hear (nobody supervises them
+    /// now), then the port is closed and reopened later.
+    fn disconnect(&mut self, now: Instant, problem: String) {
+        let wanted = self.torque.wanted;
+        self.torque.wanted = false;
+        self.torque_off_everywhere();
+        // What the user asked for comes back with the arm.
+        self.torque.wanted = wanted;
+        if let Link::Up(arm) = &self.link {
+            self.bus_totals = self.bus_totals.plus(arm.bus.stats());
+        }
+        self.link = Link::Down { next_attempt: now };
+        self.problem = Some(problem);
+        self.present = None;
+        self.torque.on = false;
+        self.torque.uncertain = true;
+        self.answering = [false; JOINT_COUNT];
+        emergency::set_line(None);
+    }
+
+    fn try_reconnect(&mut self, now: Instant) {
+        let Link::Down { next_attempt } = self.link else {
+            return;
+        };
+        if now < next_attempt {
+            return;
+        }
+        let attached = connect_bus(&mut self.connector, self.settings.bus)
+            .and_then(|bus| Arm::reattach_on(bus, &self.settings, self.calibration.clone()));
+        match attached {
+            Ok(arm) => {
+                self.reconnects += 1;
+                self.link = Link::Up(Box::new(arm));
+                self.last_good_read = now;
+                self.problem = None;
+                self.readings.reset();
+                self.arm_last_words();
+                tracing::info!(reconnects = self.reconnects, "bus reconnected");
+                self.torque.next_attempt = now;
+                self.reconcile_torque(now);
+            }
+            Err(error) => {
+                self.link = Link::Down {
+                    next_attempt: now + self.config.reconnect_interval,
+                };
+                let problem = format!("reconnecting: {error}");
+                if self.problem.as_deref() != Some(problem.as_str()) {
+                    let refused = matches!(error, ArmError::CalibrationDiffers { .. });
+                    if refused {
+                        tracing::error!("{problem}");
+                    } else {
+                        tracing::warn!(%error, "reconnection failed; trying again");
+                    }
+                }
+                self.problem = Some(problem);
+            }
+        }
+    }
+
+    fn arm_last_words(&self) {
+        if !self.config.last_words {
+            return;
+        }
+        if let Link::Up(arm) = &self.link {
+            emergency::set_line(arm.bus.transport().emergency_writer());
+        }
+    }
+}
+
+/// Why these readings must not be acted on, if they must not: far outside the calibrated range,
+/// or from a servo that reports its angle sensor failing.
+fn implausible<T: Transport>(
+    calibration: &ArmCalibration,
+    ticks: &[i32; JOINT_COUNT],
+    arm: &Arm<T>,
+) -> Option<String> {
+    for (joint, (&tick, motor)) in ticks.iter().zip(&calibration.motors).enumerate() {
+        if arm.bus.servo_errors(motor.id).0 & ServoErrors::ANGLE_SENSOR != 0 {
+            return Some(format!(
+                "{} (id {}) reports an angle sensor error: goals withheld",
+                JOINT_NAMES[joint], motor.id
+            ));
+        }
+        let low = motor.range_min - IMPLAUSIBLE_MARGIN_TICKS;
+        let high = motor.range_max + IMPLAUSIBLE_MARGIN_TICKS;
+        if !(low..=high).contains(&tick) {
+            return Some(format!(
+                "{} (id {}) reads {tick} ticks, far outside its calibrated range {}..{}: wrong calibration file? Goals withheld",
+                JOINT_NAMES[joint], motor.id, motor.range_min, motor.range_max
+            ));
+        }
+    }
+    None
+}
