@@ -1,7 +1,9 @@
 """so101-launch: start the stack's nodes together by profile and stop them cleanly.
 
   robot:    sim (so101_sim_node) or real (so101_feetech_driver on --port; --emulate puts the
-            servo-bus emulator behind it, for a try without an arm)
+            servo-bus emulator behind it, for a try without an arm: the arm of
+            assets/emulated_arm/so101_calibration.json, or of --calibration / --robot-id's file,
+            for the emulator and the driver alike)
   control:  teleop (teleop_node: keyboard, gamepad or leader arm), expert (the scripted expert,
             --episodes N), policy (so101-run-policy with --policy), or none
   --record: recorder_node, one bag per episode into --bags (the expert and the keyboard mark the
@@ -36,11 +38,14 @@ import signal
 import subprocess
 import sys
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 
 from .isolation import network_namespace_problem
-from .paths import ISOLATED, node_binary, node_environment
+from .paths import ISOLATED, REPO_ROOT, node_binary, node_environment
+
+# The arm `--robot real --emulate` emulates unless the user names a calibration.
+EMULATED_ARM_CALIBRATION = REPO_ROOT / "assets" / "emulated_arm" / "so101_calibration.json"
 
 
 @dataclass
@@ -77,17 +82,25 @@ def plan(args) -> list[NodeSpec]:
         specs.append(NodeSpec("so101_sim_node", sim, ready="publisher /joint_states"))
     else:
         port = args.port
+        calibration = args.calibration
         if args.emulate:
             port = port or str(Path(args.log_dir) / "servo_bus")
-            specs.append(NodeSpec("so101_servo_emulator", [str(node_binary("so101_servo_emulator")), "--link", port],
+            # The emulated servos come configured as the calibration the driver reads says.
+            if not calibration and not args.robot_id:
+                calibration = str(EMULATED_ARM_CALIBRATION)
+            arm = Path(calibration) if calibration else lerobot_calibration_file(args.robot_id)
+            if not arm.is_file():
+                raise SystemExit(f"so101-launch: no calibration file {arm} for the emulated arm")
+            specs.append(NodeSpec("so101_servo_emulator", [str(node_binary("so101_servo_emulator")), "--link", port,
+                                                           "--calibration", str(arm)],
                                   ready=f"path {port}", open_stdin=True))
         if not port:
             raise SystemExit("so101-launch: --robot real needs --port (or --emulate)")
         driver = [str(node_binary("so101_feetech_driver")), "--port", port, *ns]
         if args.robot_id:
             driver += ["--robot-id", args.robot_id]
-        if args.calibration:
-            driver += ["--calibration", args.calibration]
+        if calibration:
+            driver += ["--calibration", calibration]
         driver += shlex.split(args.driver_args)
         specs.append(NodeSpec("so101_feetech_driver", driver, ready="publisher /joint_states"))
         if args.control == "teleop" and args.teleop_source == "leader":
@@ -140,6 +153,23 @@ def plan(args) -> list[NodeSpec]:
         runner += shlex.split(args.policy_args)
         specs.append(NodeSpec("so101-run-policy", runner, ends_run=True))
     return specs
+
+
+def lerobot_calibration_file(robot_id: str) -> Path:
+    """Where LeRobot (and the driver's --robot-id) keeps a follower arm's calibration:
+    $HF_LEROBOT_CALIBRATION, else $HF_LEROBOT_HOME/calibration, else $HF_HOME/lerobot/calibration,
+    else ~/.cache/huggingface/lerobot/calibration; then robots/so_follower/ID.json."""
+    env = {name: os.environ.get(name) or None for name in
+           ("HF_LEROBOT_CALIBRATION", "HF_LEROBOT_HOME", "HF_HOME", "XDG_CACHE_HOME", "HOME")}
+    if env["HF_LEROBOT_CALIBRATION"]:
+        base = Path(env["HF_LEROBOT_CALIBRATION"])
+    elif env["HF_LEROBOT_HOME"]:
+        base = Path(env["HF_LEROBOT_HOME"]) / "calibration"
+    else:
+        cache = Path(env["XDG_CACHE_HOME"]) if env["XDG_CACHE_HOME"] else Path(env["HOME"] or "") / ".cache"
+        hf_home = Path(env["HF_HOME"]) if env["HF_HOME"] else cache / "huggingface"
+        base = hf_home / "lerobot" / "calibration"
+    return base / "robots" / "so_follower" / f"{robot_id}.json"
 
 
 class Launch:
@@ -301,7 +331,9 @@ def parser() -> argparse.ArgumentParser:
     real.add_argument("--port", default=None, help="the arm's servo bus, e.g. /dev/ttyACM0")
     real.add_argument("--robot-id", default=None, help="the arm's LeRobot calibration id")
     real.add_argument("--calibration", default=None, help="a LeRobot calibration file instead of --robot-id's")
-    real.add_argument("--emulate", action="store_true", help="run so101_servo_emulator as the arm (no hardware)")
+    real.add_argument("--emulate", action="store_true",
+                      help="run so101_servo_emulator as the arm (no hardware): the arm of --calibration or "
+                           "--robot-id's file, else the project's assets/emulated_arm/so101_calibration.json")
     real.add_argument("--leader-port", default=None, help="the leader arm's bus (--teleop-source leader)")
     real.add_argument("--leader-id", default=None, help="the leader arm's calibration id")
     real.add_argument("--driver-args", default="", help="more so101_feetech_driver flags")

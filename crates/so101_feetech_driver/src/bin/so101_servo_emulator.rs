@@ -1,5 +1,8 @@
 //! An STS3215 servo bus on a pseudo-terminal, for running the SO-101 driver without hardware.
 //!
+//! `--calibration FILE` makes it the arm of that LeRobot calibration file, as LeRobot left it
+//! configured: the emulated arm out of the box.
+//!
 //! Prints `PTY <path>` once the port is ready, then reads control commands from stdin (one per
 //! line, each answered with one line: `ok`, `error: ...` or the JSON of `dump`).
 
@@ -13,12 +16,19 @@ use std::{
 use anyhow::{bail, Context};
 use clap::{Parser, ValueEnum};
 use so101_core::ros::{logging, shutdown::Shutdown};
-use so101_feetech_driver::emulator::{ControlCommand, Emulator, EmulatorConfig, Timing};
+use so101_feetech_driver::{
+    calibration::ArmCalibration,
+    emulator::{ControlCommand, Emulator, EmulatorConfig, Timing},
+};
 
 const CONTROL_HELP: &str = "Control commands on stdin, one per line:
   move ID TICKS        set a servo's shaft (absolute ticks), as a hand does with torque off
   silent ID on|off     the servo obeys but stops answering
   error ID BITS        status error bits of every reply (decimal or 0x hex)
+  stall ID on|off      an obstacle blocks the shaft: it does not move, the position error and
+                       the load build up (past Overload_Torque for Protection_Time: overload)
+  overload ID          trip the servo's overload protection now: status error 0x20 and torque
+                       off until torque is enabled again
   drop P               probability (0..=1) that a reply is lost
   corrupt P            probability (0..=1) that a reply has a flipped bit
   delay MS             extra delay before replies, in milliseconds
@@ -26,7 +36,7 @@ const CONTROL_HELP: &str = "Control commands on stdin, one per line:
   unplug INDEX         detach the servo in slot INDEX (0-based)
   plug INDEX           attach it again
   hangup SECONDS       the adapter disappears; it comes back at the same link after SECONDS
-  clear                all faults off
+  clear                all faults off, obstacles taken away
   dump                 one JSON line with every slot
   quit                 stop (as do stdin EOF, SIGINT and SIGTERM)";
 
@@ -42,16 +52,28 @@ enum TimingArg {
 #[derive(Debug, Parser)]
 #[command(name = "so101_servo_emulator", version, after_help = CONTROL_HELP)]
 struct Cli {
-    /// Servo ids, one slot each, in bus order.
-    #[arg(long, value_delimiter = ',', default_value = "1,2,3,4,5,6")]
+    /// Servo ids, one slot each, in bus order (factory servos).
+    #[arg(
+        long,
+        value_delimiter = ',',
+        default_value = "1,2,3,4,5,6",
+        conflicts_with = "calibration"
+    )]
     ids: Vec<u8>,
+    /// A LeRobot calibration file: the six servos of that arm (ids, Homing_Offset, position
+    /// limits) with LeRobot's configuration in their EPROM (Return_Delay_Time 0, position mode,
+    /// P 16 / I 0 / D 32; gripper Max_Torque_Limit 500, Protection_Current 250, Overload_Torque 25),
+    /// shafts in the middle of the calibrated ranges. A --state file that exists wins over it.
+    #[arg(long, value_name = "FILE")]
+    calibration: Option<PathBuf>,
     /// Slot indices (0-based) plugged in at start; default all.
     #[arg(long, value_delimiter = ',')]
     plugged: Option<Vec<usize>>,
     /// Symlink to the pty, kept across hangups (what the driver should open).
     #[arg(long)]
     link: Option<PathBuf>,
-    /// JSON file where the servos' EPROM and shaft positions persist.
+    /// JSON file where the servos' EPROM and shaft positions persist; when it exists, the servos
+    /// power up from it (it wins over --calibration).
     #[arg(long)]
     state: Option<PathBuf>,
     #[arg(long, value_enum, default_value_t = TimingArg::Realistic)]
@@ -72,16 +94,20 @@ struct Cli {
 
 impl Cli {
     fn config(&self) -> anyhow::Result<EmulatorConfig> {
+        let calibration = match &self.calibration {
+            Some(path) => Some(ArmCalibration::load(path)?),
+            None => None,
+        };
+        let ids = match &calibration {
+            Some(calibration) => calibration.ids().to_vec(),
+            None => self.ids.clone(),
+        };
         let plugged = match &self.plugged {
             Some(indices) => {
-                if let Some(bad) = indices.iter().find(|index| **index >= self.ids.len()) {
-                    bail!("--plugged {bad}: there are only {} slots", self.ids.len());
+                if let Some(bad) = indices.iter().find(|index| **index >= ids.len()) {
+                    bail!("--plugged {bad}: there are only {} slots", ids.len());
                 }
-                Some(
-                    (0..self.ids.len())
-                        .map(|slot| indices.contains(&slot))
-                        .collect(),
-                )
+                Some((0..ids.len()).map(|slot| indices.contains(&slot)).collect())
             }
             None => None,
         };
@@ -91,7 +117,8 @@ impl Cli {
         let tau = Duration::try_from_secs_f64(self.tau_ms / 1000.0)
             .context("--tau-ms must be a non-negative number")?;
         Ok(EmulatorConfig {
-            ids: self.ids.clone(),
+            ids,
+            calibration,
             plugged,
             timing: match self.timing {
                 TimingArg::Instant => Timing::Instant,

@@ -1,8 +1,13 @@
 //! The servos on one bus: instruction semantics (protocol 0), injected faults and the timing of
 //! the half-duplex wire. Pure: the pty loop feeds it packets and writes back what it returns.
 //!
-//! Not modelled: a broadcast PING or READ (nobody answers), and collisions: two plugged servos
-//! with the same id both answer a unicast request, one after the other.
+//! A broadcast PING is answered by every plugged servo that can answer, in ascending id order, one
+//! status packet after the other, each after its own Return_Delay_Time (how real firmware keeps
+//! them apart is not documented; Dynamixel servos answer a broadcast ping in id order, and
+//! LeRobot's `broadcast_ping` accepts any order within its timeout).
+//!
+//! Not modelled: a broadcast READ (nobody answers), and collisions: two plugged servos with the
+//! same id both answer a unicast request, one after the other.
 
 use std::{path::Path, time::Duration};
 
@@ -10,10 +15,15 @@ use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
 
+use so101_core::robot::JOINT_NAMES;
+
 use super::{servo::ServoModel, EmulatorError};
-use crate::protocol::{
-    decode_instruction, encode_status, registers as reg, timing, Instruction, ServoErrors,
-    StatusPacket, BROADCAST_ID, MAX_PACKET_LEN,
+use crate::{
+    calibration::ArmCalibration,
+    protocol::{
+        decode_instruction, encode_status, registers as reg, timing, Instruction, ServoErrors,
+        StatusPacket, BROADCAST_ID, MAX_PACKET_LEN,
+    },
 };
 
 /// Status packet bytes that are not data: header, id, length, error, checksum.
@@ -86,7 +96,12 @@ pub struct SlotSnapshot {
     pub p: i32,
     pub d: i32,
     pub i: i32,
+    /// Injected error bits (`error ID BITS`).
     pub errors: u8,
+    /// An obstacle blocks the shaft (`stall ID on`).
+    pub stalled: bool,
+    /// The overload protection tripped (status error 0x20 until torque is enabled again).
+    pub overload: bool,
 }
 
 /// What survives a power cycle: each slot's flash and where its shaft rests.
@@ -131,6 +146,20 @@ impl BusEmulator {
             .iter()
             .map(|id| SlotState {
                 servo: ServoModel::factory(*id),
+                plugged: true,
+                silent: false,
+            })
+            .collect();
+        Self::new(slots, timing, seed)
+    }
+
+    /// The six servos of an arm calibrated and configured by LeRobot, in joint order, all plugged,
+    /// shafts at mid-range (see `ServoModel::calibrated`).
+    pub fn with_calibrated_arm(calibration: &ArmCalibration, timing: Timing, seed: u64) -> Self {
+        let slots = calibrated_servos(calibration)
+            .into_iter()
+            .map(|servo| SlotState {
+                servo,
                 plugged: true,
                 silent: false,
             })
@@ -208,6 +237,8 @@ impl BusEmulator {
                     d: servo.register(reg::D_COEFFICIENT),
                     i: servo.register(reg::I_COEFFICIENT),
                     errors: servo.errors,
+                    stalled: servo.stalled(),
+                    overload: servo.overload_tripped(),
                 }
             })
             .collect()
@@ -269,6 +300,7 @@ impl BusEmulator {
         let broadcast = id == BROADCAST_ID;
         match instruction {
             Instruction::Ping if !broadcast => self.answer(id, |_| Vec::new()),
+            Instruction::Ping => self.answer_broadcast_ping(),
             Instruction::Read { address, length } if !broadcast && *length > 0 => {
                 self.answer(id, |servo| read_what_fits(servo, *address, *length))
             }
@@ -324,6 +356,21 @@ impl BusEmulator {
             .collect()
     }
 
+    /// Every plugged servo that can answer, in ascending id order (bus order among equal ids),
+    /// each with its own id.
+    fn answer_broadcast_ping(&self) -> Vec<(StatusPacket, u8)> {
+        let mut answering: Vec<usize> = self
+            .addressed(BROADCAST_ID)
+            .into_iter()
+            .filter(|index| !self.slots[*index].silent)
+            .collect();
+        answering.sort_by_key(|index| self.slots[*index].servo.id());
+        answering
+            .into_iter()
+            .map(|index| self.status(index, self.slots[index].servo.id(), Vec::new()))
+            .collect()
+    }
+
     /// Applies `apply` to each addressed servo; those with Response_Status_Level >= 1 answer a
     /// unicast request. The answer carries the id the request was sent to: after a write of ID
     /// the servo still answers as the one that was asked.
@@ -354,7 +401,7 @@ impl BusEmulator {
         let delay = servo.register(reg::RETURN_DELAY_TIME).clamp(0, 255) as u8;
         let status = StatusPacket {
             id,
-            errors: ServoErrors(servo.errors),
+            errors: ServoErrors(servo.status_errors()),
             parameters,
         };
         (status, delay)
@@ -418,6 +465,16 @@ impl BusEmulator {
             Timing::Realistic { .. } => RETURN_DELAY_UNIT * u32::from(register),
         }
     }
+}
+
+/// The servos of a calibrated arm, in joint order (the last one is the gripper).
+pub fn calibrated_servos(calibration: &ArmCalibration) -> Vec<ServoModel> {
+    calibration
+        .motors
+        .iter()
+        .zip(JOINT_NAMES)
+        .map(|(motor, name)| ServoModel::calibrated(motor, name == "gripper"))
+        .collect()
 }
 
 /// The bytes a READ of `length` at `address` returns, cut at the table's end and at what fits in
@@ -583,6 +640,106 @@ mod tests {
         let ping = bus.handle(Duration::ZERO, &request(1, Instruction::Ping));
         // 6-byte request, 500 us factory delay, 6-byte reply.
         assert_eq!(ping.due, Duration::from_micros(60 + 500 + 60));
+    }
+
+    #[test]
+    fn broadcast_ping_is_answered_by_every_servo_in_id_order_one_after_the_other() {
+        let mut bus = BusEmulator::with_factory_servos(
+            &[3, 1, 6, 2, 5, 4],
+            Timing::Realistic { baud: 1_000_000 },
+            7,
+        );
+        bus.slots[4].silent = true; // id 5
+        bus.slots[5].plugged = false; // id 4
+        bus.slots[2].servo.errors = ServoErrors::OVERHEAT; // id 6
+        let ping = request(BROADCAST_ID, Instruction::Ping);
+        let response = bus.handle(Duration::ZERO, &ping);
+        let answers = statuses(&response.bytes);
+        let ids: Vec<u8> = answers.iter().map(|status| status.id).collect();
+        assert_eq!(ids, [1, 2, 3, 6]);
+        assert!(answers.iter().all(|status| status.parameters.is_empty()));
+        assert_eq!(answers[3].errors, ServoErrors(ServoErrors::OVERHEAT));
+        // The 6-byte request, then per servo its return delay (factory 500 us) and its status.
+        assert_eq!(response.due, Duration::from_micros(60 + 4 * (500 + 60)));
+        // LeRobot's Return_Delay_Time 0: back to back.
+        bus.handle(response.due, &write(BROADCAST_ID, 7, &[0]));
+        let start = bus.bus_free_at;
+        assert_eq!(
+            bus.handle(start, &ping).due,
+            start + Duration::from_micros(60 + 4 * 60)
+        );
+    }
+
+    #[test]
+    fn a_negative_present_position_is_read_with_the_sign_at_bit_15() {
+        let mut bus = bus(Timing::Instant);
+        bus.slots[0].servo.set_actual(30.0);
+        bus.handle(Duration::ZERO, &write(1, 31, &[100, 0]));
+        let read = request(
+            1,
+            Instruction::Read {
+                address: 56,
+                length: 2,
+            },
+        );
+        let status = decode_status(&bus.handle(Duration::ZERO, &read).bytes).unwrap();
+        assert_eq!(status.parameters, [70, 0x80]);
+    }
+
+    #[test]
+    fn an_overloaded_servo_reports_it_and_reads_torque_off() {
+        let mut bus = bus(Timing::Instant);
+        bus.handle(Duration::ZERO, &write(2, 35, &[10])); // Protection_Time 100 ms
+        bus.handle(Duration::ZERO, &write(2, 40, &[1]));
+        bus.slots[1].servo.set_stalled(true);
+        bus.handle(Duration::ZERO, &write(2, 42, &[0x00, 0x0C])); // goal 3072, blocked at 2048
+        let torque = request(
+            2,
+            Instruction::Read {
+                address: 40,
+                length: 1,
+            },
+        );
+        let before = decode_status(&bus.handle(Duration::from_millis(90), &torque).bytes).unwrap();
+        assert_eq!(
+            (before.errors, before.parameters),
+            (ServoErrors(0), vec![1])
+        );
+        let after = decode_status(&bus.handle(Duration::from_millis(120), &torque).bytes).unwrap();
+        assert_eq!(after.errors, ServoErrors(ServoErrors::OVERLOAD));
+        assert_eq!(after.parameters, [0]);
+        let snapshot = &bus.snapshot()[1];
+        assert!(snapshot.overload && snapshot.stalled && snapshot.torque_enable == 0);
+        // Torque enabled again: the error is gone.
+        let enabled = bus.handle(Duration::from_millis(130), &write(2, 40, &[1]));
+        assert_eq!(
+            decode_status(&enabled.bytes).unwrap().errors,
+            ServoErrors(0)
+        );
+    }
+
+    #[test]
+    fn a_calibrated_arm_has_the_files_ids_in_joint_order() {
+        let calibration = ArmCalibration::from_json(
+            include_str!("../../../../assets/emulated_arm/so101_calibration.json"),
+            Path::new("so101_calibration.json"),
+        )
+        .unwrap();
+        let bus = BusEmulator::with_calibrated_arm(&calibration, Timing::Instant, 0);
+        let snapshot = bus.snapshot();
+        for (slot, motor) in snapshot.iter().zip(&calibration.motors) {
+            assert_eq!(slot.id, motor.id);
+            assert_eq!(slot.homing_offset, motor.homing_offset);
+            assert_eq!(slot.min_position_limit, motor.range_min);
+            assert_eq!(slot.max_position_limit, motor.range_max);
+            assert_eq!(
+                slot.present_position,
+                (motor.range_min + motor.range_max) / 2
+            );
+            assert_eq!(slot.return_delay_time, 0);
+        }
+        assert_eq!(snapshot[5].max_torque_limit, 500);
+        assert_eq!(snapshot[0].max_torque_limit, 1000);
     }
 
     #[test]

@@ -5,12 +5,14 @@
 //! move ID TICKS        set a servo's shaft (absolute ticks), as a hand does with torque off
 //! silent ID on|off     the servo obeys but stops answering
 //! error ID BITS        status error bits of every reply (decimal or 0x hex)
+//! stall ID on|off      an obstacle blocks the shaft (position error and load build up)
+//! overload ID          trip the servo's overload protection now (error 0x20, torque off)
 //! drop P | corrupt P   probability (0..=1) that a reply is lost | has a flipped bit
 //! delay MS             extra delay before replies (milliseconds, fractional allowed)
 //! garbage N            N random bytes before the next reply
 //! unplug INDEX | plug INDEX   detach / attach the servo in slot INDEX (0-based)
 //! hangup SECONDS       the adapter disappears and comes back after SECONDS
-//! clear | dump | quit  all faults off | one JSON line with every slot | stop
+//! clear | dump | quit  all faults off (obstacles too) | one JSON line with every slot | stop
 //! ```
 
 use std::{str::FromStr, time::Duration};
@@ -20,12 +22,16 @@ use super::bus::{BusEmulator, Faults};
 const USAGE_MOVE: &str = "move ID TICKS";
 const USAGE_SILENT: &str = "silent ID on|off";
 const USAGE_ERROR: &str = "error ID BITS";
+const USAGE_STALL: &str = "stall ID on|off";
+const USAGE_OVERLOAD: &str = "overload ID";
 
 #[derive(Debug, Clone, PartialEq)]
 pub enum ControlCommand {
     Move { id: u8, ticks: f64 },
     Silent { id: u8, on: bool },
     Error { id: u8, bits: u8 },
+    Stall { id: u8, on: bool },
+    Overload { id: u8 },
     Drop(f64),
     Corrupt(f64),
     Delay(Duration),
@@ -42,7 +48,7 @@ pub enum ControlCommand {
 pub enum ControlError {
     #[error("empty command")]
     Empty,
-    #[error("unknown command `{0}` (known: move, silent, error, drop, corrupt, delay, garbage, unplug, plug, hangup, clear, dump, quit)")]
+    #[error("unknown command `{0}` (known: move, silent, error, stall, overload, drop, corrupt, delay, garbage, unplug, plug, hangup, clear, dump, quit)")]
     Unknown(String),
     #[error("usage: {0}")]
     Usage(&'static str),
@@ -83,14 +89,22 @@ impl FromStr for ControlCommand {
             }
             "silent" => {
                 expect(2, USAGE_SILENT)?;
-                let on = match arguments[1] {
-                    "on" => true,
-                    "off" => false,
-                    other => return Err(bad("switch", other, "on or off")),
-                };
                 Self::Silent {
                     id: parse_id(arguments[0])?,
-                    on,
+                    on: parse_switch(arguments[1])?,
+                }
+            }
+            "stall" => {
+                expect(2, USAGE_STALL)?;
+                Self::Stall {
+                    id: parse_id(arguments[0])?,
+                    on: parse_switch(arguments[1])?,
+                }
+            }
+            "overload" => {
+                expect(1, USAGE_OVERLOAD)?;
+                Self::Overload {
+                    id: parse_id(arguments[0])?,
                 }
             }
             "error" => {
@@ -166,6 +180,16 @@ impl ControlCommand {
                     bus.slots[index].servo.errors = bits;
                 }
             }
+            Self::Stall { id, on } => {
+                for index in existing_slots(bus, id)? {
+                    bus.slots[index].servo.set_stalled(on);
+                }
+            }
+            Self::Overload { id } => {
+                for index in existing_slots(bus, id)? {
+                    bus.slots[index].servo.trip_overload();
+                }
+            }
             Self::Drop(probability) => bus.faults.drop_probability = probability,
             Self::Corrupt(probability) => bus.faults.corrupt_probability = probability,
             Self::Delay(delay) => bus.faults.extra_delay = delay,
@@ -183,6 +207,7 @@ impl ControlCommand {
                 for slot in &mut bus.slots {
                     slot.silent = false;
                     slot.servo.errors = 0;
+                    slot.servo.set_stalled(false);
                 }
             }
             Self::Hangup(_) | Self::Dump | Self::Quit => {}
@@ -210,6 +235,14 @@ fn bad(what: &'static str, value: &str, expected: &'static str) -> ControlError 
 fn parse_id(word: &str) -> Result<u8, ControlError> {
     word.parse()
         .map_err(|_| bad("id", word, "an integer 0..=255"))
+}
+
+fn parse_switch(word: &str) -> Result<bool, ControlError> {
+    match word {
+        "on" => Ok(true),
+        "off" => Ok(false),
+        other => Err(bad("switch", other, "on or off")),
+    }
 }
 
 fn parse_number(
@@ -283,6 +316,15 @@ mod tests {
             parse("error 1 8"),
             Ok(ControlCommand::Error { id: 1, bits: 8 })
         );
+        assert_eq!(
+            parse("stall 4 on"),
+            Ok(ControlCommand::Stall { id: 4, on: true })
+        );
+        assert_eq!(
+            parse("stall 4 off"),
+            Ok(ControlCommand::Stall { id: 4, on: false })
+        );
+        assert_eq!(parse("overload 6"), Ok(ControlCommand::Overload { id: 6 }));
         assert_eq!(parse("drop 0.25"), Ok(ControlCommand::Drop(0.25)));
         assert_eq!(parse("corrupt 1"), Ok(ControlCommand::Corrupt(1.0)));
         assert_eq!(
@@ -313,6 +355,8 @@ mod tests {
             "probability `1.5` is not a probability in 0..=1"
         );
         assert_eq!(message("silent 1 maybe"), "switch `maybe` is not on or off");
+        assert_eq!(message("stall 1"), "usage: stall ID on|off");
+        assert_eq!(message("overload"), "usage: overload ID");
         assert_eq!(message("move 300 5"), "id `300` is not an integer 0..=255");
         assert_eq!(message("move 1 nan"), "ticks `nan` is not a finite number");
         assert!(message("error 1 0x100").contains("0x hex"));
@@ -332,8 +376,18 @@ mod tests {
         assert!(bus.slots[0].silent && !bus.slots[1].plugged);
         assert_eq!(bus.slots[0].servo.errors, 0x20);
         assert_eq!(bus.faults.drop_probability, 0.5);
+        parse("stall 2 on").unwrap().apply(&mut bus).unwrap();
+        assert!(bus.slots[1].servo.stalled());
+        parse("overload 1").unwrap().apply(&mut bus).unwrap();
+        assert!(bus.slots[0].servo.overload_tripped());
+        assert_eq!(bus.slots[0].servo.status_errors(), 0x20);
         parse("clear").unwrap().apply(&mut bus).unwrap();
         assert!(!bus.slots[0].silent && bus.slots[0].servo.errors == 0);
+        assert!(!bus.slots[1].servo.stalled(), "clear takes obstacles away");
+        assert!(
+            bus.slots[0].servo.overload_tripped(),
+            "a tripped protection stays until torque is enabled"
+        );
         assert_eq!(bus.faults, Faults::default());
         assert!(!bus.slots[1].plugged, "clear leaves the wiring alone");
         assert_eq!(

@@ -23,12 +23,15 @@ use nix::{
 use serde::Serialize;
 
 use super::{
-    bus::{BusEmulator, SlotSnapshot, SlotState, Timing},
+    bus::{calibrated_servos, BusEmulator, SlotSnapshot, SlotState, Timing},
     control::ControlCommand,
     servo::{ServoModel, DEFAULT_TAU},
     EmulatorError,
 };
-use crate::protocol::{registers as reg, PacketReader};
+use crate::{
+    calibration::ArmCalibration,
+    protocol::{registers as reg, PacketReader},
+};
 
 /// How long one poll of the master waits, so stop and hangup requests are seen promptly.
 const POLL_MS: u8 = 2;
@@ -41,8 +44,11 @@ const REOPEN_RETRY: Duration = Duration::from_millis(200);
 
 #[derive(Debug, Clone)]
 pub struct EmulatorConfig {
-    /// One slot per id, in bus order.
+    /// One slot per id, in bus order (factory servos). Ignored with `calibration`.
     pub ids: Vec<u8>,
+    /// An arm calibrated and configured by LeRobot instead of factory servos: the six servos of
+    /// the calibration, in joint order (a state file that exists wins over it).
+    pub calibration: Option<ArmCalibration>,
     /// Which slots are plugged at start (by index; missing entries are unplugged). `None`: all.
     pub plugged: Option<Vec<bool>>,
     pub timing: Timing,
@@ -62,6 +68,7 @@ impl Default for EmulatorConfig {
     fn default() -> Self {
         Self {
             ids: (1..=6).collect(),
+            calibration: None,
             plugged: None,
             timing: Timing::Instant,
             tau: DEFAULT_TAU,
@@ -285,12 +292,19 @@ impl Shared {
 }
 
 fn build_bus(config: &EmulatorConfig) -> Result<BusEmulator, EmulatorError> {
-    let slots = config
-        .ids
-        .iter()
+    let servos = match &config.calibration {
+        Some(calibration) => calibrated_servos(calibration),
+        None => config
+            .ids
+            .iter()
+            .copied()
+            .map(ServoModel::factory)
+            .collect(),
+    };
+    let slots = servos
+        .into_iter()
         .enumerate()
-        .map(|(index, id)| {
-            let mut servo = ServoModel::factory(*id);
+        .map(|(index, mut servo)| {
             servo.set_tau(config.tau);
             let plugged = match &config.plugged {
                 Some(plugged) => plugged.get(index).copied().unwrap_or(false),

@@ -76,7 +76,8 @@ pub const PRESENT_VOLTAGE: Register = register("Present_Voltage", 62, 1);
 pub const PRESENT_TEMPERATURE: Register = register("Present_Temperature", 63, 1);
 pub const STATUS: Register = register("Status", 65, 1);
 pub const MOVING: Register = register("Moving", 66, 1);
-pub const PRESENT_CURRENT: Register = register("Present_Current", 69, 2);
+/// Sign-magnitude at bit 15 as Feetech's SMS_STS library reads it (LeRobot 0.6.1 reads it unsigned).
+pub const PRESENT_CURRENT: Register = signed("Present_Current", 69, 2, 15);
 pub const MAXIMUM_VELOCITY_LIMIT: Register = register("Maximum_Velocity_Limit", 84, 1);
 pub const MAXIMUM_ACCELERATION: Register = register("Maximum_Acceleration", 85, 1);
 
@@ -241,6 +242,8 @@ mod tests {
             -100
         );
         assert_eq!(GOAL_POSITION.encode(2048).unwrap(), [0x00, 0x08]);
+        assert_eq!(PRESENT_POSITION.decode(&[70, 0x80]).unwrap(), -70);
+        assert_eq!(PRESENT_CURRENT.decode(&[53, 0x80]).unwrap(), -53);
         // The magnitude limit LeRobot users meet on wrist_roll.
         assert!(HOMING_OFFSET.encode(2048).is_err());
         assert!(HOMING_OFFSET.encode(2047).is_ok());
