@@ -60,7 +60,9 @@ def run_once(bin_dir: Path, workdir: Path, baud: int, rate: str, telemetry_rate:
     stats = workdir / "stats.json"
     stats.unlink(missing_ok=True)
     emulator = subprocess.Popen(
-        [str(bin_dir / "so101_servo_emulator"), "--link", str(link), "--timing", timing, "--baud", str(baud)],
+        # The emulated servos hold the calibration the driver is given (the driver refuses others).
+        [str(bin_dir / "so101_servo_emulator"), "--link", str(link), "--timing", timing, "--baud", str(baud),
+         "--calibration", str(calibration)],
         stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True,
     )
     try:

@@ -108,9 +108,10 @@ def pytest_runtest_makereport(item: pytest.Item, call: pytest.CallInfo):
 # =========================================================================== the driver + emulator
 @pytest.fixture
 def arm_factory(request: pytest.FixtureRequest, tmp_path: Path):
-    """start(*driver_args, emulator_args=(), calibration=CALIBRATION) -> (SimNode, ServoEmulator):
-    a servo-bus emulator on a pty (linked at tmp_path/bus) and so101_feetech_driver on it with a
-    LeRobot calibration file. At teardown the driver gets SIGINT and must exit 0 (unless the test set
+    """start(*driver_args, emulator_args=(), calibration=CALIBRATION, emulator_calibration=None)
+    -> (SimNode, ServoEmulator): a servo-bus emulator on a pty (linked at tmp_path/bus), its servos
+    calibrated with `emulator_calibration` (default: the same file; "factory": uncalibrated), and
+    so101_feetech_driver on it with the LeRobot calibration file `calibration`. At teardown the driver gets SIGINT and must exit 0 (unless the test set
     `node.exit_expected = True`)."""
     from driver_harness import CALIBRATION, DRIVER_NAME, ServoEmulator, write_calibration
 
@@ -118,12 +119,19 @@ def arm_factory(request: pytest.FixtureRequest, tmp_path: Path):
     emulators: list[ServoEmulator] = []
     request.node._so101_sim_nodes = nodes
 
-    def start(*args: str, emulator_args=(), calibration=CALIBRATION, wait=True):
+    def start(*args: str, emulator_args=(), calibration=CALIBRATION, emulator_calibration=None, wait=True):
+        # The emulated servos come calibrated as the file says (as after `calibrate`), unless the
+        # test gives them another calibration, or "factory" for servos fresh from the box.
         index = len(emulators)
         link = tmp_path / f"bus{index}"
-        emulator = ServoEmulator(link, tmp_path / f"emulator.{index}.log", *emulator_args)
-        emulators.append(emulator)
         cal_path = write_calibration(tmp_path / f"calibration{index}.json", calibration)
+        if emulator_calibration == "factory":
+            preset = []
+        else:
+            servo_cal = emulator_calibration or calibration
+            preset = ["--calibration", str(write_calibration(tmp_path / f"servos{index}.json", servo_cal))]
+        emulator = ServoEmulator(link, tmp_path / f"emulator.{index}.log", *preset, *emulator_args)
+        emulators.append(emulator)
         argv = ["--port", str(link), "--calibration", str(cal_path), *[str(a) for a in args]]
         node = SimNode(node_binary(DRIVER_NAME), argv, tmp_path / f"{DRIVER_NAME}.{index}.log")
         nodes.append(node)

@@ -358,11 +358,26 @@ def test_diagnostics_report_every_servo_at_one_hertz(arm_factory, ros):
     assert transactions > 0 and timeouts <= transactions / 200, bus
 
 
-def test_a_wrong_calibration_file_never_moves_a_servo(arm_factory, tmp_path):
-    # shoulder_pan calibrated to 100..1000, but the servo reads ~2000: the file belongs to another
-    # arm. Holding "present, clamped into the range" would swing the joint; the driver refuses.
+def test_servos_of_another_arm_are_refused_at_start_never_written(arm_factory):
+    # The file says shoulder_pan is calibrated to 100..1000; the servos hold another calibration:
+    # they belong to another arm. Nothing is written into their EPROM, torque stays off.
     wrong = {**CALIBRATION, "shoulder_pan": {**CALIBRATION["shoulder_pan"], "range_min": 100, "range_max": 1000}}
-    node, emulator = arm_factory(calibration=wrong)
+    node, emulator = arm_factory(calibration=wrong, emulator_calibration=CALIBRATION)
+    node.exit_expected = True
+    code = node.proc.wait(timeout=30)
+    assert code != 0, node.log_tail()
+    assert "EPROM calibration differs" in node.log() and "--write-calibration" in node.log(), node.log_tail()
+    slots = emulator.slots()
+    assert all(slot["torque_enable"] == 0 for slot in slots), slots
+    assert (slots[0]["min_position_limit"], slots[0]["max_position_limit"]) == (1000, 3000), slots[0]
+
+
+def test_a_wrong_calibration_written_on_request_never_moves_a_servo(arm_factory):
+    # Asked to write the file (--write-calibration), the driver does; then shoulder_pan reads ~2000
+    # against a range of 100..1000. Holding "present, clamped into the range" would swing the
+    # joint; the driver refuses.
+    wrong = {**CALIBRATION, "shoulder_pan": {**CALIBRATION["shoulder_pan"], "range_min": 100, "range_max": 1000}}
+    node, emulator = arm_factory("--write-calibration", calibration=wrong, emulator_calibration=CALIBRATION)
     node.exit_expected = True
     code = node.proc.wait(timeout=30)
     assert code != 0, node.log_tail()

@@ -383,6 +383,51 @@ fn an_adapter_unplugged_mid_run_is_survived_and_the_arm_taken_back_without_a_jum
 }
 
 #[test]
+fn late_replies_in_the_running_loop_are_discarded_never_taken_for_fresh_positions() {
+    let servos = calibrated_servos();
+    let mut config = config();
+    config.reopen_after = Duration::from_secs(5);
+    let mut controller = start(&servos, config);
+    assert!(command(&mut controller, "elbow_flex", 0.8));
+    for _ in 0..10 {
+        // The next answers come 10 ms late: after the timeout, during later transactions.
+        servos.hold_back_replies(2, Duration::from_millis(10));
+        cycles(&mut controller, 5);
+        command(&mut controller, "elbow_flex", -0.8);
+    }
+    let status = controller.status();
+    assert!(status.bus.stale_replies > 0, "{:?}", status.bus);
+    assert_eq!(status.safety.implausible_readings, 0);
+    assert_no_jump(&servos);
+}
+
+#[test]
+fn an_adapter_pulled_out_in_the_middle_of_a_write_is_survived() {
+    let servos = calibrated_servos();
+    let mut controller = start(&servos, config());
+    assert!(command(&mut controller, "wrist_flex", 0.7));
+    cycles(&mut controller, 3);
+    // Each cycle writes two packets (SYNC_READ, SYNC_WRITE): the goals' packet is cut.
+    servos.unplug_during_write(1);
+    cycles(&mut controller, 2);
+    assert!(!controller.is_connected());
+    servos.plug_adapter();
+    let deadline = Instant::now() + Duration::from_secs(2);
+    while !controller.status().torque_on {
+        assert!(
+            Instant::now() < deadline,
+            "{:?}",
+            controller.status().problem
+        );
+        cycles(&mut controller, 1);
+    }
+    cycles(&mut controller, 1);
+    assert!(command(&mut controller, "wrist_flex", -0.7));
+    cycles(&mut controller, 20);
+    assert_no_jump(&servos);
+}
+
+#[test]
 fn corrupted_and_lost_replies_never_lead_to_a_jump() {
     let servos = calibrated_servos();
     let mut config = config();

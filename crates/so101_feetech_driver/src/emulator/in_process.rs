@@ -46,6 +46,8 @@ struct State {
     late: Option<(usize, Duration)>,
     /// The next position reply of servo `id` reads these ticks instead of the truth.
     glitch: Option<(u8, i32)>,
+    /// The adapter is pulled out while the packet after this many more is being written.
+    unplug_after: Option<usize>,
     audit: GoalAudit,
 }
 
@@ -64,6 +66,7 @@ impl InProcessBus {
                 session: 0,
                 late: None,
                 glitch: None,
+                unplug_after: None,
                 audit: GoalAudit::default(),
             })),
         }
@@ -113,6 +116,12 @@ impl InProcessBus {
     /// The next Present_Position reply of servo `id` reads `ticks`, once.
     pub fn glitch_next_position(&self, id: u8, ticks: i32) {
         lock(&self.shared).glitch = Some((id, ticks));
+    }
+
+    /// The adapter is pulled out in the middle of the packet after the next `packets` ones: that
+    /// packet never arrives and its write fails.
+    pub fn unplug_during_write(&self, packets: usize) {
+        lock(&self.shared).unplug_after = Some(packets);
     }
 
     pub fn goal_audit(&self) -> GoalAudit {
@@ -240,6 +249,17 @@ impl Transport for InProcessTransport {
     fn write_all(&mut self, bytes: &[u8]) -> io::Result<()> {
         let mut state = lock(&self.shared);
         state.check(self.session)?;
+        match state.unplug_after {
+            Some(0) => {
+                state.unplug_after = None;
+                state.plugged = false;
+                state.session += 1;
+                state.pending.clear();
+                return Err(unplugged());
+            }
+            Some(count) => state.unplug_after = Some(count - 1),
+            None => {}
+        }
         self.reader.push(bytes);
         while let Some(frame) = self.reader.next_frame() {
             if let Ok(packet) = frame {

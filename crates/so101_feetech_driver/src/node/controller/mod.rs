@@ -19,16 +19,19 @@ use so101_core::{
     robot::{JointLimit, JointPositions, JOINT_COUNT, JOINT_NAMES},
 };
 
+mod link;
+mod torque;
+
 use super::{diagnostics::ServoReport, emergency};
 use crate::{
     arm::{
         connect_bus, reopen_and_broadcast_torque_off, Arm, ArmError, ArmSettings, CalibrationWrite,
-        Telemetry, TorqueOffReport,
+        Telemetry,
     },
     bus::{BusError, BusStats, Connector, Transport},
     calibration::ArmCalibration,
     protocol::ServoErrors,
-    safety::{torque_on_refusal, GoalShaper, ReadingFilter, SafetyConfig, SafetyCounters},
+    safety::{GoalShaper, ReadingFilter, SafetyConfig, SafetyCounters},
 };
 
 /// How often a torque state that does not match the wish is retried.
@@ -416,146 +419,6 @@ impl<C: Connector> Controller<C> {
         self.problem = Some(problem);
     }
 
-    /// A servo that reports overload has dropped its own torque (its protection): which, if any.
-    fn overloaded(&self) -> Option<String> {
-        let Link::Up(arm) = &self.link else {
-            return None;
-        };
-        self.calibration
-            .motors
-            .iter()
-            .enumerate()
-            .find(|(_, motor)| arm.bus.servo_errors(motor.id).0 & ServoErrors::OVERLOAD != 0)
-            .map(|(joint, motor)| {
-                format!(
-                    "torque off: {} (id {}) reports overload and dropped its own torque; torque is off on every servo. Clear the obstruction, then call /torque_enable true",
-                    JOINT_NAMES[joint], motor.id
-                )
-            })
-    }
-
-    /// A servo cut its torque by itself: the others follow (never a half-stiff arm), and the
-    /// user decides when to go on.
-    fn drop_torque_after(&mut self, problem: String) {
-        tracing::error!("{problem}");
-        self.torque_problem = Some(TorqueProblem::NeedsUser(problem));
-        self.torque.wanted = false;
-        if let Err(error) = self.apply_torque_wish() {
-            tracing::error!(%error, "torque off after an overload not confirmed");
-        }
-    }
-
-    /// Retries a torque state that does not match the wish (a failed change, a reconnect).
-    fn reconcile_torque(&mut self, now: Instant) {
-        let matches = self.torque.on == self.torque.wanted && !self.torque.uncertain;
-        if matches || now < self.torque.next_attempt {
-            return;
-        }
-        self.torque.next_attempt = now + TORQUE_RETRY;
-        if self.apply_torque_wish().is_ok() {
-            tracing::info!(on = self.torque.on, "torque state restored");
-        }
-    }
-
-    /// Brings the servos' torque in line with the wish. Torque on first makes the present
-    /// position the goal, so the arm does not jump to an old one.
-    fn apply_torque_wish(&mut self) -> Result<(), TorqueError> {
-        if !matches!(self.link, Link::Up(_)) {
-            return Ok(());
-        }
-        let result = if self.torque.wanted {
-            self.torque_on()
-        } else {
-            match self.torque_off_everywhere() {
-                Some(report) if report.confirmed() => Ok(()),
-                Some(report) => Err(TorqueError::Unconfirmed(report.unacknowledged)),
-                None => Ok(()),
-            }
-        };
-        match &result {
-            Ok(()) => {
-                self.torque.on = self.torque.wanted;
-                self.torque.uncertain = false;
-                if matches!(self.torque_problem, Some(TorqueProblem::Failed(_))) {
-                    self.torque_problem = None;
-                }
-            }
-            Err(TorqueError::Refused(reason)) => {
-                self.torque.on = false;
-                self.torque.uncertain = false;
-                tracing::error!("{reason}");
-                self.torque_problem = Some(TorqueProblem::NeedsUser(reason.clone()));
-            }
-            Err(error) => {
-                // Some servos may have switched: no goals until a retry confirms all of them.
-                self.torque.on = false;
-                self.torque.uncertain = true;
-                tracing::error!(%error, wanted = self.torque.wanted, "cannot change torque");
-                self.torque_problem = Some(TorqueProblem::Failed(format!(
-                    "torque change failed: {error}"
-                )));
-            }
-        }
-        result
-    }
-
-    fn torque_on(&mut self) -> Result<(), TorqueError> {
-        let Link::Up(arm) = &mut self.link else {
-            return Ok(());
-        };
-        let ticks = arm.read_positions()?;
-        if let Some(problem) = implausible(&self.calibration, &ticks, arm) {
-            return Err(TorqueError::Refused(format!("torque refused: {problem}")));
-        }
-        let present: JointPositions =
-            std::array::from_fn(|joint| self.calibration.radians_from_ticks(joint, ticks[joint]));
-        if let Some(refusal) = torque_on_refusal(&present, &self.limits, self.shaper.max_step()) {
-            // Sticky: the user moves the joint and asks again; torque never comes on by itself
-            // under a hand that is still at the arm.
-            self.torque.wanted = false;
-            self.torque_off_everywhere();
-            return Err(TorqueError::Refused(refusal));
-        }
-        self.shaper.hold(&present);
-        let held = self.shaper.targets().copied().unwrap_or(present);
-        let goals =
-            std::array::from_fn(|joint| self.calibration.ticks_from_radians(joint, held[joint]));
-        let Link::Up(arm) = &mut self.link else {
-            return Ok(());
-        };
-        let result = arm.write_goals(&goals).and_then(|()| arm.torque_on());
-        if let Err(error) = result {
-            // Never half stiff: the servos that took torque on give it up again.
-            self.torque_off_everywhere();
-            return Err(error.into());
-        }
-        Ok(())
-    }
-
-    /// Torque off on every servo whatever fails; `None` when the link is down (then a broadcast
-    /// on a freshly opened port was tried).
-    fn torque_off_everywhere(&mut self) -> Option<TorqueOffReport> {
-        self.shaper.release();
-        match &mut self.link {
-            Link::Up(arm) => {
-                let report = arm.torque_off_everywhere();
-                if report.broadcast_failed {
-                    // The port itself failed: a fresh one may still reach the servos.
-                    let _ = reopen_and_broadcast_torque_off(&mut self.connector, self.settings.bus);
-                }
-                Some(report)
-            }
-            Link::Down { .. } => {
-                if let Err(error) =
-                    reopen_and_broadcast_torque_off(&mut self.connector, self.settings.bus)
-                {
-                    tracing::debug!(%error, "torque off broadcast while disconnected failed");
-                }
-                None
-            }
-        }
-    }
-
     fn read_telemetry(&mut self, now: Instant) {
         let Link::Up(arm) = &mut self.link else {
             return;
@@ -578,98 +441,6 @@ impl<C: Connector> Controller<C> {
                 })
                 .collect(),
             _ => Vec::new(),
-        }
-    }
-
-    fn bus_fault(&mut self, error: BusError, now: Instant) {
-        if let BusError::NoAnswer { missing, .. } = &error {
-            let ids = self.calibration.ids();
-            self.answering = std::array::from_fn(|joint| !missing.contains(&ids[joint]));
-            let joints: Vec<&str> = (0..JOINT_COUNT)
-                .filter(|joint| !self.answering[*joint])
-                .map(|joint| JOINT_NAMES[joint])
-                .collect();
-            self.problem = Some(format!(
-                "no answer from {} (ids {missing:?}): goals withheld",
-                joints.join(", ")
-            ));
-        } else {
-            self.problem = Some(error.to_string());
-        }
-        let silent_for = now.duration_since(self.last_good_read);
-        if error.is_disconnected() || silent_for > self.config.reopen_after {
-            tracing::error!(%error, silent_for = ?silent_for, "bus lost: torque off, reconnecting by itself");
-            self.disconnect(now, format!("bus lost ({error}); reconnecting"));
-        } else {
-            tracing::warn!("{}", self.problem.as_deref().unwrap_or(""));
-        }
-    }
-
-    /// The link is lost: torque off for every servo that can still hear (nobody supervises them
-    /// now), then the port is closed and reopened later.
-    fn disconnect(&mut self, now: Instant, problem: String) {
-        let wanted = self.torque.wanted;
-        self.torque.wanted = false;
-        self.torque_off_everywhere();
-        // What the user asked for comes back with the arm.
-        self.torque.wanted = wanted;
-        if let Link::Up(arm) = &self.link {
-            self.bus_totals = self.bus_totals.plus(arm.bus.stats());
-        }
-        self.link = Link::Down { next_attempt: now };
-        self.problem = Some(problem);
-        self.present = None;
-        self.torque.on = false;
-        self.torque.uncertain = true;
-        self.answering = [false; JOINT_COUNT];
-        emergency::set_line(None);
-    }
-
-    fn try_reconnect(&mut self, now: Instant) {
-        let Link::Down { next_attempt } = self.link else {
-            return;
-        };
-        if now < next_attempt {
-            return;
-        }
-        let attached = connect_bus(&mut self.connector, self.settings.bus)
-            .and_then(|bus| Arm::reattach_on(bus, &self.settings, self.calibration.clone()));
-        match attached {
-            Ok(arm) => {
-                self.reconnects += 1;
-                self.link = Link::Up(Box::new(arm));
-                self.last_good_read = now;
-                self.problem = None;
-                self.readings.reset();
-                self.arm_last_words();
-                tracing::info!(reconnects = self.reconnects, "bus reconnected");
-                self.torque.next_attempt = now;
-                self.reconcile_torque(now);
-            }
-            Err(error) => {
-                self.link = Link::Down {
-                    next_attempt: now + self.config.reconnect_interval,
-                };
-                let problem = format!("reconnecting: {error}");
-                if self.problem.as_deref() != Some(problem.as_str()) {
-                    let refused = matches!(error, ArmError::CalibrationDiffers { .. });
-                    if refused {
-                        tracing::error!("{problem}");
-                    } else {
-                        tracing::warn!(%error, "reconnection failed; trying again");
-                    }
-                }
-                self.problem = Some(problem);
-            }
-        }
-    }
-
-    fn arm_last_words(&self) {
-        if !self.config.last_words {
-            return;
-        }
-        if let Link::Up(arm) = &self.link {
-            emergency::set_line(arm.bus.transport().emergency_writer());
         }
     }
 }
