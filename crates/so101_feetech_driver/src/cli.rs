@@ -32,6 +32,11 @@ pub enum Command {
     SetupMotors(SetupMotorsArgs),
     /// Find the servos on the bus: ids, models, firmware, at one or every baud rate.
     Scan(ScanArgs),
+    /// Find the adapter's serial port: unplug it when asked; the port that disappears is the one.
+    FindPort(FindPortArgs),
+    /// Print or install a udev rule: /dev/so101_follower and /dev/so101_leader by the adapters'
+    /// USB serial numbers, access for the dialout group, FTDI latency timer at 1 ms.
+    InstallUdev(InstallUdevArgs),
 }
 
 /// Where the bus is.
@@ -282,4 +287,31 @@ fn parse_positive_ms(text: &str) -> Result<f64, String> {
             Err(format!("{text:?} ms is more than 10 s"))
         }
     })
+}
+
+#[derive(Debug, Clone, clap::Args)]
+pub struct FindPortArgs {
+    /// Where to look for ports, a shell wildcard in the last part of the path (repeatable;
+    /// default: /dev/ttyACM*, /dev/ttyUSB*, /dev/serial/by-id/*).
+    #[arg(long, value_name = "PATTERN")]
+    pub dev_glob: Vec<String>,
+}
+
+#[derive(Debug, Clone, clap::Args)]
+pub struct InstallUdevArgs {
+    /// USB serial number of the follower arm's adapter (ATTRS{serial}; find-port prints it).
+    #[arg(long, value_name = "SERIAL")]
+    pub follower_serial: String,
+    /// USB serial number of the leader arm's adapter.
+    #[arg(long, value_name = "SERIAL")]
+    pub leader_serial: Option<String>,
+    /// Print the rules (the default).
+    #[arg(long, conflicts_with = "install")]
+    pub print: bool,
+    /// Write the rules to --rules-dir/99-so101.rules (needs root for /etc).
+    #[arg(long)]
+    pub install: bool,
+    /// Directory of the installed rules.
+    #[arg(long, default_value = crate::tools::udev::DEFAULT_RULES_DIR, requires = "install")]
+    pub rules_dir: PathBuf,
 }

@@ -17,6 +17,8 @@ fn main() -> ExitCode {
         Some(Command::Calibrate(args)) => tools::calibrate::run(args),
         Some(Command::SetupMotors(args)) => tools::setup_motors::run(args),
         Some(Command::Scan(args)) => tools::scan::run(args),
+        Some(Command::FindPort(args)) => tools::find_port::run(args),
+        Some(Command::InstallUdev(args)) => tools::udev::run(args),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

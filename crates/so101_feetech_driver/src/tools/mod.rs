@@ -1,10 +1,13 @@
-//! Set-up tools of the binary: calibration, motor ids and baud, bus scan. Each keeps its
+//! Set-up tools of the binary: calibration, motor ids and baud, bus scan, finding the adapter's
+//! port, the udev rule. Each keeps its
 //! procedure (talking to the bus) apart from the terminal prompts, so tests drive the procedure
 //! against the emulator.
 
 pub mod calibrate;
+pub mod find_port;
 pub mod scan;
 pub mod setup_motors;
+pub mod udev;
 
 use std::io::{BufRead, Write};
 

@@ -40,7 +40,10 @@ pub fn assign(
     target_baud: u32,
 ) -> Result<u8, SetupError> {
     let target_index = baud_index(target_baud).ok_or(SetupError::UnsupportedBaud(target_baud))?;
-    let open = |baud: u32| open_bus(port, probe_config(BusConfig { baud, ..config }));
+    // Searching pings many absent ids, so it waits briefly and never retries; the writes to the
+    // servo that was found use the full settings (a reply late under load must not end the set-up).
+    let probe = |baud: u32| open_bus(port, probe_config(BusConfig { baud, ..config }));
+    let open = |baud: u32| open_bus(port, BusConfig { baud, ..config });
     let bauds = std::iter::once(target_baud).chain(
         BAUD_RATES
             .iter()
@@ -49,11 +52,11 @@ pub fn assign(
     );
     let mut found = None;
     for baud in bauds {
-        let mut bus = open(baud)?;
+        let mut bus = probe(baud)?;
         match find_servos(&mut bus, MAX_ID)?.as_slice() {
             [] => continue,
             [only] => {
-                found = Some((bus, baud, *only));
+                found = Some((baud, *only));
                 break;
             }
             many => {
@@ -64,13 +67,14 @@ pub fn assign(
             }
         }
     }
-    let (mut bus, baud, servo) = found.ok_or(SetupError::NoServo)?;
+    let (baud, servo) = found.ok_or(SetupError::NoServo)?;
     if servo.model != i32::from(registers::STS3215_MODEL) {
         return Err(SetupError::WrongModel {
             id: servo.id,
             model: servo.model,
         });
     }
+    let mut bus = open(baud)?;
     bus.write(servo.id, registers::TORQUE_ENABLE, 0)?;
     bus.write(servo.id, registers::LOCK, 0)?;
     if servo.id != new_id {

@@ -1,0 +1,80 @@
+"""A command run as a user runs it in a terminal: stdin and stdout through pipes, `expect` waits for
+text in its output, `press_enter` answers a prompt, `interrupt` is Ctrl-C (SIGINT to its process
+group, as a terminal sends it)."""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import threading
+import time
+from pathlib import Path
+
+
+class Terminal:
+    def __init__(self, argv: list[str], env: dict[str, str] | None = None, cwd: Path | None = None):
+        self.argv = argv
+        self.proc = subprocess.Popen(
+            argv,
+            stdin=subprocess.PIPE,
+            stdout=subprocess.PIPE,
+            stderr=subprocess.STDOUT,
+            env=env,
+            cwd=cwd,
+            text=True,
+            bufsize=0,
+            start_new_session=True,  # its own process group, like a terminal's foreground job
+        )
+        self.output = ""
+        self._lock = threading.Lock()
+        threading.Thread(target=self._pump, daemon=True).start()
+
+    def _pump(self) -> None:
+        while chunk := self.proc.stdout.read(1):
+            with self._lock:
+                self.output += chunk
+
+    def text(self) -> str:
+        with self._lock:
+            return self.output
+
+    def expect(self, text: str, timeout: float = 15.0) -> None:
+        deadline = time.monotonic() + timeout
+        while time.monotonic() < deadline:
+            if text in self.text():
+                return
+            if self.proc.poll() is not None:
+                time.sleep(0.2)  # the pump may still hold the last bytes
+                if text in self.text():
+                    return
+                break
+            time.sleep(0.02)
+        raise AssertionError(f"{text!r} not seen in the output of {self.argv}:\n{self.text()}")
+
+    def press_enter(self) -> None:
+        self.proc.stdin.write("\n")
+        self.proc.stdin.flush()
+
+    def wait(self, timeout: float = 30.0) -> int:
+        try:
+            code = self.proc.wait(timeout=timeout)
+        except subprocess.TimeoutExpired:
+            self.kill()
+            raise AssertionError(f"{self.argv} did not end within {timeout} s; output:\n{self.text()}") from None
+        time.sleep(0.1)  # let the pump take the last bytes
+        return code
+
+    def interrupt(self, timeout: float = 20.0) -> int:
+        """Ctrl-C: SIGINT to the whole process group; the exit code."""
+        if self.proc.poll() is None:
+            os.killpg(self.proc.pid, signal.SIGINT)
+        return self.wait(timeout)
+
+    def kill(self) -> None:
+        if self.proc.poll() is None:
+            try:
+                os.killpg(self.proc.pid, signal.SIGKILL)
+            except ProcessLookupError:
+                pass
+            self.proc.wait()
