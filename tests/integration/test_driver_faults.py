@@ -144,3 +144,21 @@ def test_an_overloaded_servo_makes_the_whole_arm_limp_and_says_why(arm_factory, 
     answer = set_torque(ros, node, True)
     assert answer.success, answer.message
     assert torque(emulator) == [1] * 6
+
+
+def test_out_of_range_flags_are_refused_with_a_message():
+    import subprocess
+
+    from harness import node_binary
+
+    for flags, words in [
+        (["--max-step", "2"], "not a safety limit"),
+        (["--max-step", "nan"], "above 0"),
+        (["--retries", "100"], "100"),
+        (["--baud", "12345"], "baud rate"),
+        (["--rate", "inf"], "5000 Hz"),
+        (["--command-timeout=-1"], "seconds from 0"),
+    ]:
+        done = subprocess.run([str(node_binary(DRIVER)), *flags], capture_output=True, text=True, timeout=30)
+        assert done.returncode == 2, (flags, done.stderr)
+        assert words in done.stderr, (flags, done.stderr)

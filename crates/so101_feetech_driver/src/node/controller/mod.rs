@@ -137,6 +137,9 @@ pub enum TorqueError {
     Bus(#[from] BusError),
     #[error("{0}")]
     Refused(String),
+    /// The readings themselves cannot be trusted (a wrong calibration file, a failing sensor).
+    #[error("{0}")]
+    Implausible(String),
     #[error("torque off not confirmed by servo(s) {0:?}")]
     Unconfirmed(Vec<u8>),
 }
@@ -287,7 +290,7 @@ impl<C: Connector> Controller<C> {
                 self.torque_problem = None;
                 (true, format!("torque {}", if on { "on" } else { "off" }))
             }
-            Err(TorqueError::Refused(reason)) => (false, reason),
+            Err(TorqueError::Refused(reason) | TorqueError::Implausible(reason)) => (false, reason),
             Err(error) => (
                 false,
                 format!("torque change failed ({error}); retrying every {TORQUE_RETRY:?}"),

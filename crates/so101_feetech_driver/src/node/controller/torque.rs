@@ -78,7 +78,7 @@ impl<C: Connector> Controller<C> {
                     self.torque_problem = None;
                 }
             }
-            Err(TorqueError::Refused(reason)) => {
+            Err(TorqueError::Refused(reason) | TorqueError::Implausible(reason)) => {
                 self.torque.on = false;
                 self.torque.uncertain = false;
                 tracing::error!("{reason}");
@@ -103,7 +103,10 @@ impl<C: Connector> Controller<C> {
         };
         let ticks = arm.read_positions()?;
         if let Some(problem) = implausible(&self.calibration, &ticks, arm) {
-            return Err(TorqueError::Refused(format!("torque refused: {problem}")));
+            self.torque.wanted = false;
+            return Err(TorqueError::Implausible(format!(
+                "torque refused: {problem}"
+            )));
         }
         let present: JointPositions =
             std::array::from_fn(|joint| self.calibration.radians_from_ticks(joint, ticks[joint]));
