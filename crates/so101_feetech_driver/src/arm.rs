@@ -39,6 +39,8 @@ pub enum ArmError {
     },
     #[error("the servos' EPROM calibration differs from the calibration file ({}): not the arm this file belongs to (swapped, or recalibrated elsewhere?). Nothing was written; torque is off. Plug in the arm that matches, calibrate this one, or start the driver with --write-calibration to write the file's values into these servos", .differences.join("; "))]
     CalibrationDiffers { differences: Vec<String> },
+    #[error("torque off not acknowledged by servo(s) {unacknowledged:?}: not reconfiguring servos that may hold torque")]
+    TorqueNotOff { unacknowledged: Vec<u8> },
     #[error(transparent)]
     Bus(#[from] BusError),
 }
@@ -222,14 +224,14 @@ impl<T: Transport> Arm<T> {
             arm.torque_off_everywhere();
             return Err(ArmError::CalibrationDiffers { differences });
         }
-        arm.configure(settings)?;
+        arm.configure(settings, write)?;
         Ok(arm)
     }
 
     /// Reconnects after the link was lost, without writing any EPROM: servos whose calibration
     /// differs from the file are not the arm we knew (another arm was plugged in) and are refused
-    /// with their torque off. Settings that live in RAM are rewritten (a power cycle resets them).
-    /// Torque is left to the caller.
+    /// with their torque off. Settings that live in RAM are rewritten (a power cycle resets them)
+    /// after torque off was broadcast on opening; torque on is left to the caller.
     pub fn reattach_on(
         bus: ServoBus<T>,
         settings: &ArmSettings,
@@ -253,7 +255,13 @@ impl<T: Transport> Arm<T> {
         Ok(arm)
     }
 
+    /// Finds the six servos. Torque off is broadcast first: whoever hears the bus is limp before
+    /// anything else happens (a driver killed before, an arm still holding after an unplug), even
+    /// when a servo turns out to be missing and nothing further is done.
     fn find(mut bus: ServoBus<T>, calibration: ArmCalibration) -> Result<Self, ArmError> {
+        if let Err(error) = broadcast_torque_off(&mut bus) {
+            tracing::debug!(%error, "torque off broadcast on opening failed");
+        }
         let ids = calibration.ids();
         let mut servos = Vec::with_capacity(JOINT_COUNT);
         for (joint, id) in ids.iter().enumerate() {
@@ -332,15 +340,16 @@ impl<T: Transport> Arm<T> {
 
     /// LeRobot's so101 set-up: answer at once, full acceleration, position mode, its PID gains,
     /// and a torque-limited gripper.
-    fn configure(&mut self, settings: &ArmSettings) -> Result<(), BusError> {
+    fn configure(
+        &mut self,
+        settings: &ArmSettings,
+        write: CalibrationWrite,
+    ) -> Result<(), ArmError> {
         // No servo is reconfigured while any of them may still hold torque.
         let torque_off = self.torque_off_everywhere();
-        if let Some(&id) = torque_off.unacknowledged.first() {
-            return Err(BusError::NotConfirmed {
-                id,
-                register: registers::TORQUE_ENABLE.name,
-                wrote: 0,
-                read: -1,
+        if !torque_off.confirmed() {
+            return Err(ArmError::TorqueNotOff {
+                unacknowledged: torque_off.unacknowledged,
             });
         }
         for (joint, (&id, motor)) in self.ids.iter().zip(&self.calibration.motors).enumerate() {
@@ -369,7 +378,8 @@ impl<T: Transport> Arm<T> {
                 ensure(bus, id, registers::PROTECTION_CURRENT, 250)?;
                 ensure(bus, id, registers::OVERLOAD_TORQUE, 25)?;
             }
-            if write_motor_calibration(bus, motor)? {
+            // Compared before; written only when asked (a misread must not lead to a write).
+            if write == CalibrationWrite::Allowed && write_motor_calibration(bus, motor)? {
                 tracing::warn!(
                     joint = JOINT_NAMES[joint],
                     id,

@@ -291,7 +291,7 @@ fn parse_positive_ms(text: &str) -> Result<f64, String> {
 
 #[derive(Debug, Clone, clap::Args)]
 pub struct FindPortArgs {
-    /// Where to look for ports, a shell wildcard in the last part of the path (repeatable;
+    /// Where to look for ports, a path with shell wildcards (repeatable;
     /// default: /dev/ttyACM*, /dev/ttyUSB*, /dev/serial/by-id/*).
     #[arg(long, value_name = "PATTERN")]
     pub dev_glob: Vec<String>,

@@ -159,6 +159,45 @@ fn a_deaf_first_servo_does_not_keep_the_others_stiff_on_request() {
 }
 
 #[test]
+fn a_servo_that_misses_its_own_torque_off_still_gets_the_broadcast() {
+    let servos = calibrated_servos();
+    let mut controller = start(&servos, config());
+    cycles(&mut controller, 3);
+    // Every request to servo 1 alone is lost on the wire, retries included.
+    servos.lose_requests_to(1, 100);
+    let (success, message) = controller.request_torque(false);
+    assert!(!success && message.contains('1'), "{message}");
+    assert_eq!(torque(&servos), [0; 6], "the broadcast reached servo 1");
+}
+
+#[test]
+fn a_misread_at_the_moment_torque_comes_on_is_not_the_pose_held() {
+    let servos = calibrated_servos();
+    let mut config = config();
+    config.torque_at_start = false;
+    let mut controller = start(&servos, config);
+    cycles(&mut controller, 3);
+    // elbow_flex rests at 2048; the first reading of the torque-on reads 2350 (in range).
+    servos.glitch_next_position(3, 2350);
+    let (success, message) = controller.request_torque(true);
+    assert!(success, "{message}");
+    cycles(&mut controller, 30);
+    let (present, goal) = servos.with_bus(|bus| {
+        let elbow = &bus.slots[2].servo;
+        (
+            elbow.register(reg::PRESENT_POSITION),
+            elbow.register(reg::GOAL_POSITION),
+        )
+    });
+    assert!(
+        (present - 2048).abs() <= 2,
+        "the arm moved to the misread pose: {present}"
+    );
+    assert!((goal - 2048).abs() <= 2, "goal {goal}");
+    assert!(controller.status().safety.implausible_readings >= 1);
+}
+
+#[test]
 fn a_lost_link_turns_torque_off_and_the_wish_returns_with_the_arm() {
     let servos = calibrated_servos();
     let mut controller = start(&servos, config());

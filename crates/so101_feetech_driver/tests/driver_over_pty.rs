@@ -287,7 +287,7 @@ fn garbage_bytes_and_late_replies_do_not_desynchronise_the_bus() {
 }
 
 #[test]
-fn an_unplugged_adapter_is_reported_and_reattached_without_dropping_torque() {
+fn an_unplugged_adapter_is_reported_and_reattached_limp_until_torque_is_asked_for() {
     let bench = emulator(EmulatorConfig::default());
     let mut arm = Arm::connect(
         &bench.link,
@@ -318,14 +318,21 @@ fn an_unplugged_adapter_is_reported_and_reattached_without_dropping_torque() {
         }
     };
     assert!(arm.read_positions().is_ok());
+    // Opening the port broadcasts torque off: nobody held the servos while the adapter was gone.
     assert!(
         bench
             .emulator
             .snapshot()
             .iter()
-            .all(|s| s.torque_enable == 1),
-        "reattaching must not drop a holding arm"
+            .all(|s| s.torque_enable == 0),
+        "reattached servos are limp until torque is asked for"
     );
+    arm.torque_on().unwrap();
+    assert!(bench
+        .emulator
+        .snapshot()
+        .iter()
+        .all(|s| s.torque_enable == 1));
 }
 
 #[test]

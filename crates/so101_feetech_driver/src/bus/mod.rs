@@ -8,8 +8,9 @@
 //! Protocol 0 has no sequence numbers, so a late reply looks like any other. Replies are matched to
 //! their request by id and data length; after a servo missed an answer, its late reply is "owed",
 //! and the next read from it asks for a different length (one byte more, dropped afterwards), so
-//! the owed reply can never be taken as the answer to that read. An owed write acknowledgement (no
-//! data, nothing to vary) is waited for briefly before the next write or ping to that servo.
+//! the owed reply can never be taken as the answer to that read (when every length within reach is
+//! owed, the owed replies are waited out first). A write acknowledgement has no data to vary: a
+//! write to a servo that owes one is confirmed by reading the register back.
 
 mod owed;
 mod transport;
@@ -196,7 +197,7 @@ impl<T: Transport> ServoBus<T> {
     }
 
     pub fn read_bytes(&mut self, id: u8, address: u8, length: u8) -> Result<Vec<u8>, BusError> {
-        let asked = self.owed.distinct_length(address, length, &[id]);
+        let asked = self.read_length(address, length, &[id])?;
         let instruction = Instruction::Read {
             address,
             length: asked,
@@ -224,9 +225,13 @@ impl<T: Transport> ServoBus<T> {
             self.transact("WRITE", id, &instruction, &[id], 0)?;
             return Ok(());
         }
-        self.transact("WRITE", id, &instruction, &[], 0)?;
-        // This write's own acknowledgement is on its way too; the read below settles one of them.
-        self.owed.add(&[id], 0, Instant::now());
+        // Whatever acknowledgement comes (the owed one or this write's) is waited for, so the
+        // read below does not talk over it on the half-duplex line; it proves nothing by itself.
+        // (One answer in, one more sent out: what is owed stays as it was.)
+        match self.transact("WRITE", id, &instruction, &[id], 0) {
+            Ok(_) | Err(BusError::NoAnswer { .. }) => {}
+            Err(error) => return Err(error),
+        }
         let read = self.read(id, register)?;
         if read != value {
             return Err(BusError::NotConfirmed {
@@ -275,7 +280,7 @@ impl<T: Transport> ServoBus<T> {
         length: u8,
         ids: &[u8],
     ) -> Result<Vec<Reply>, BusError> {
-        let asked = self.owed.distinct_length(address, length, ids);
+        let asked = self.read_length(address, length, ids)?;
         let instruction = Instruction::SyncRead {
             address,
             length: asked,
@@ -454,6 +459,29 @@ impl<T: Transport> ServoBus<T> {
         self.settle_buffered_replies();
         self.reader.clear();
         Ok(())
+    }
+
+    /// The length a read should ask for (see `OwedReplies::distinct_length`); when none is free,
+    /// the owed replies are waited out for a slack's time and then taken as lost.
+    fn read_length(&mut self, address: u8, length: u8, ids: &[u8]) -> Result<u8, BusError> {
+        if let Some(asked) = self.owed.distinct_length(address, length, ids) {
+            return Ok(asked);
+        }
+        let deadline = Instant::now() + self.config.slack;
+        self.reader.clear();
+        loop {
+            let count = self
+                .transport
+                .read_until(&mut self.buffer[..], deadline)
+                .map_err(BusError::Disconnected)?;
+            self.reader.push(&self.buffer[..count]);
+            self.settle_buffered_replies();
+            if count == 0 && Instant::now() >= deadline {
+                break;
+            }
+        }
+        self.owed.forget(ids);
+        Ok(length)
     }
 
     /// Counts the owed replies among the buffered packets (the rest is left for the caller).

@@ -48,6 +48,8 @@ struct State {
     glitch: Option<(u8, i32)>,
     /// The adapter is pulled out while the packet after this many more is being written.
     unplug_after: Option<usize>,
+    /// The next `count` unicast requests to servo `id` are lost on the wire (it never hears them).
+    lost_requests: Option<(u8, usize)>,
     audit: GoalAudit,
 }
 
@@ -67,6 +69,7 @@ impl InProcessBus {
                 late: None,
                 glitch: None,
                 unplug_after: None,
+                lost_requests: None,
                 audit: GoalAudit::default(),
             })),
         }
@@ -118,6 +121,12 @@ impl InProcessBus {
         lock(&self.shared).glitch = Some((id, ticks));
     }
 
+    /// The next `count` requests addressed to servo `id` alone never reach it (line noise); a
+    /// broadcast still does.
+    pub fn lose_requests_to(&self, id: u8, count: usize) {
+        lock(&self.shared).lost_requests = Some((id, count));
+    }
+
     /// The adapter is pulled out in the middle of the packet after the next `packets` ones: that
     /// packet never arrives and its write fails.
     pub fn unplug_during_write(&self, packets: usize) {
@@ -166,6 +175,14 @@ impl State {
 
     /// One instruction packet arrives at the servos.
     fn receive(&mut self, packet: &[u8]) {
+        if let (Some((lost_id, count)), Ok((id, _))) =
+            (self.lost_requests.as_mut(), decode_instruction(packet))
+        {
+            if id == *lost_id && *count > 0 {
+                *count -= 1;
+                return;
+            }
+        }
         let now = self.epoch.elapsed();
         self.bus.advance_to(now);
         self.audit_goals(packet);
@@ -387,7 +404,7 @@ mod tests {
     }
 
     #[test]
-    fn a_late_write_acknowledgement_is_waited_out_not_taken_for_the_next_write() {
+    fn a_late_write_acknowledgement_is_never_taken_for_the_next_write() {
         let servos = servos();
         let mut bus = bus_on(&servos);
         servos.hold_back_replies(1, Duration::from_millis(30));

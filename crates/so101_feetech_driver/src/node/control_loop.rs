@@ -1,4 +1,4 @@
-//! The driver node: the controller (node/controller.rs) on the serial port, behind ROS. Every
+//! The driver node: the controller (node/controller/) on the serial port, behind ROS. Every
 //! cycle: commands in, torque requests served, one controller cycle (SYNC_READ of positions,
 //! checks, SYNC_WRITE of goals), joint states out; /diagnostics at 1 Hz; a summary at exit.
 
@@ -52,7 +52,7 @@ pub fn run(args: RunArgs) -> Result<()> {
     }
     let leader = role == ArmRole::Leader;
     // Last words (a panic, a second Ctrl-C) turn torque off unless the user wants it kept.
-    emergency::install_panic_hook();
+    emergency::install_panic_hook(true);
     let shutdown = Shutdown::on_signals_then(|| {
         if emergency::torque_off_now() {
             eprintln!("so101_feetech_driver: torque off was broadcast to every servo");

@@ -48,8 +48,10 @@ pub fn torque_off_now() -> bool {
 }
 
 /// Installs (once per process) a panic hook that says the last words, then does what the
-/// previous hook did.
-pub fn install_panic_hook() {
+/// previous hook did; with `end_process`, it then ends the process (exit code 101, as a panic on
+/// the main thread does): a panic on any other thread must not leave the node running with the arm
+/// limp while it believes torque is on.
+pub fn install_panic_hook(end_process: bool) {
     HOOK.call_once(|| {
         let previous = std::panic::take_hook();
         std::panic::set_hook(Box::new(move |info| {
@@ -57,6 +59,9 @@ pub fn install_panic_hook() {
                 eprintln!("so101_feetech_driver: panic: torque off was broadcast to every servo");
             }
             previous(info);
+            if end_process {
+                std::process::exit(101);
+            }
         }));
     });
 }

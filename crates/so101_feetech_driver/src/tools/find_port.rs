@@ -13,7 +13,7 @@ use std::{
     time::{Duration, Instant},
 };
 
-use anyhow::{bail, Result};
+use anyhow::{bail, Context, Result};
 
 use crate::cli::FindPortArgs;
 
@@ -165,75 +165,15 @@ pub fn failure_text(outcome: &Outcome, after: &[PortEntry]) -> Option<String> {
     }
 }
 
-/// Does `name` match the shell wildcard `pattern` (`*`, `?`; no brackets)?
-pub fn wildcard_matches(pattern: &str, name: &str) -> bool {
-    let pattern: Vec<char> = pattern.chars().collect();
-    let name: Vec<char> = name.chars().collect();
-    // Iterative matching with backtracking to the last `*`.
-    let (mut p, mut n) = (0, 0);
-    let mut star: Option<(usize, usize)> = None;
-    while n < name.len() {
-        match pattern.get(p) {
-            Some('*') => {
-                star = Some((p, n));
-                p += 1;
-            }
-            Some('?') => {
-                p += 1;
-                n += 1;
-            }
-            Some(c) if *c == name[n] => {
-                p += 1;
-                n += 1;
-            }
-            _ => match star {
-                Some((star_p, star_n)) => {
-                    p = star_p + 1;
-                    n = star_n + 1;
-                    star = Some((star_p, star_n + 1));
-                }
-                None => return false,
-            },
-        }
-    }
-    pattern[p..].iter().all(|c| *c == '*')
-}
-
-/// Splits a pattern into its directory (no wildcards allowed there) and its file-name pattern.
-pub fn split_glob(pattern: &str) -> Result<(PathBuf, String), String> {
-    let path = Path::new(pattern);
-    let name = path
-        .file_name()
-        .and_then(|name| name.to_str())
-        .ok_or_else(|| format!("{pattern:?} names no file"))?;
-    let dir = path
-        .parent()
-        .filter(|dir| !dir.as_os_str().is_empty())
-        .unwrap_or(Path::new("."));
-    if dir.to_string_lossy().contains(['*', '?']) {
-        return Err(format!(
-            "{pattern:?}: wildcards are only allowed in the last part of the path"
-        ));
-    }
-    Ok((dir.to_owned(), name.to_owned()))
-}
-
-/// The ports present now: every name matching a pattern that resolves to something (a dangling
-/// link is a port that is gone), sorted, each once.
+/// The ports present now: every path matching a pattern (the `glob` crate's shell wildcards)
+/// that resolves to something (a dangling link is a port that is gone), sorted, each once.
 pub fn list_ports(globs: &[String]) -> Result<Vec<PortEntry>> {
     let mut ports = Vec::new();
     for pattern in globs {
-        let (dir, name_pattern) = split_glob(pattern).map_err(anyhow::Error::msg)?;
-        let Ok(entries) = std::fs::read_dir(&dir) else {
-            continue; // /dev/serial/by-id exists only while some adapter is plugged in
-        };
-        for entry in entries.flatten() {
-            let name = entry.file_name();
-            let Some(name) = name.to_str() else { continue };
-            if !wildcard_matches(&name_pattern, name) {
-                continue;
-            }
-            let path = dir.join(name);
+        let paths = glob::glob(pattern)
+            .with_context(|| format!("--dev-glob {pattern:?} is not a wildcard pattern"))?;
+        // An entry that cannot be read (gone while listing) is no port.
+        for path in paths.flatten() {
             if let Ok(device) = std::fs::canonicalize(&path) {
                 ports.push(PortEntry { path, device });
             }
@@ -437,29 +377,6 @@ mod tests {
     }
 
     #[test]
-    fn wildcards_match_like_the_shell() {
-        assert!(wildcard_matches("ttyACM*", "ttyACM0"));
-        assert!(wildcard_matches("ttyACM*", "ttyACM"));
-        assert!(!wildcard_matches("ttyACM*", "ttyUSB0"));
-        assert!(wildcard_matches("*", "usb-1a86_x-if00"));
-        assert!(wildcard_matches("tty?CM*0", "ttyACM10"));
-        assert!(wildcard_matches("*bus*", "so101_bus_1"));
-        assert!(!wildcard_matches("tty?", "tty"));
-        assert!(wildcard_matches("exact", "exact"));
-        assert!(!wildcard_matches("exact", "exact1"));
-    }
-
-    #[test]
-    fn globs_split_into_directory_and_name() {
-        assert_eq!(
-            split_glob("/dev/ttyACM*"),
-            Ok(("/dev".into(), "ttyACM*".into()))
-        );
-        assert_eq!(split_glob("bus*"), Ok((".".into(), "bus*".into())));
-        assert!(split_glob("/dev/*/x").is_err());
-    }
-
-    #[test]
     fn listing_follows_links_and_skips_dangling_ones() {
         let dir = tempfile::tempdir().unwrap();
         let device = dir.path().join("ttyFAKE0");
@@ -475,6 +392,10 @@ mod tests {
             "/nonexistent-dir/*".to_owned(),
         ];
         let ports = list_ports(&globs).unwrap();
+        assert!(
+            list_ports(&["/dev/[".to_owned()]).is_err(),
+            "a broken pattern is reported"
+        );
         let device = std::fs::canonicalize(&device).unwrap();
         assert_eq!(
             ports,

@@ -69,6 +69,8 @@ struct Torque {
     /// A change failed part-way: the servos' state is not known until a retry succeeds.
     uncertain: bool,
     next_attempt: Instant,
+    /// Torque-on attempts that failed in a row.
+    failed_on: u32,
 }
 
 enum Link<T: Transport> {
@@ -140,6 +142,9 @@ pub enum TorqueError {
     /// The readings themselves cannot be trusted (a wrong calibration file, a failing sensor).
     #[error("{0}")]
     Implausible(String),
+    /// Consecutive readings disagree: where the arm is is not known well enough to hold it.
+    #[error("the joints' readings disagree: {0}")]
+    Unsteady(String),
     #[error("torque off not confirmed by servo(s) {0:?}")]
     Unconfirmed(Vec<u8>),
 }
@@ -198,6 +203,7 @@ impl<C: Connector> Controller<C> {
                 on: false,
                 uncertain: true,
                 next_attempt: now,
+                failed_on: 0,
             },
             config,
             connector,
@@ -267,6 +273,7 @@ impl<C: Connector> Controller<C> {
             );
         }
         self.torque.wanted = on;
+        self.torque.failed_on = 0;
         if let Link::Down { .. } = self.link {
             if on {
                 return (

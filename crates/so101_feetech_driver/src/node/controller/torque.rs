@@ -6,11 +6,17 @@ use std::time::Instant;
 use so101_core::robot::{JointPositions, JOINT_NAMES};
 
 use super::{implausible, Controller, Link, TorqueError, TorqueProblem, TORQUE_RETRY};
+
+/// Pairs of readings tried before torque-on gives up for this attempt.
+const STEADY_ATTEMPTS: usize = 3;
+/// Failed torque-on attempts in a row after which the wish is dropped and the user asked again
+/// (a servo that keeps refusing must not make the arm sag and catch itself forever).
+const TORQUE_ON_ATTEMPTS: u32 = 3;
 use crate::{
     arm::{reopen_and_broadcast_torque_off, TorqueOffReport},
     bus::Connector,
     protocol::ServoErrors,
-    safety::torque_on_refusal,
+    safety::{torque_on_refusal, ReadingFilter},
 };
 
 impl<C: Connector> Controller<C> {
@@ -74,6 +80,7 @@ impl<C: Connector> Controller<C> {
             Ok(()) => {
                 self.torque.on = self.torque.wanted;
                 self.torque.uncertain = false;
+                self.torque.failed_on = 0;
                 if matches!(self.torque_problem, Some(TorqueProblem::Failed(_))) {
                     self.torque_problem = None;
                 }
@@ -92,24 +99,23 @@ impl<C: Connector> Controller<C> {
                 self.torque_problem = Some(TorqueProblem::Failed(format!(
                     "torque change failed: {error}"
                 )));
+                if self.torque.wanted {
+                    self.torque.failed_on += 1;
+                    if self.torque.failed_on >= TORQUE_ON_ATTEMPTS {
+                        self.torque.wanted = false;
+                        self.torque_problem = Some(TorqueProblem::NeedsUser(format!(
+                            "torque off: torque on failed {TORQUE_ON_ATTEMPTS} times ({error}); call /torque_enable true to try again"
+                        )));
+                        self.torque_off_everywhere();
+                    }
+                }
             }
         }
         result
     }
 
     pub(super) fn torque_on(&mut self) -> Result<(), TorqueError> {
-        let Link::Up(arm) = &mut self.link else {
-            return Ok(());
-        };
-        let ticks = arm.read_positions()?;
-        if let Some(problem) = implausible(&self.calibration, &ticks, arm) {
-            self.torque.wanted = false;
-            return Err(TorqueError::Implausible(format!(
-                "torque refused: {problem}"
-            )));
-        }
-        let present: JointPositions =
-            std::array::from_fn(|joint| self.calibration.radians_from_ticks(joint, ticks[joint]));
+        let present = self.steady_positions()?;
         if let Some(refusal) = torque_on_refusal(&present, &self.limits, self.shaper.max_step()) {
             // Sticky: the user moves the joint and asks again; torque never comes on by itself
             // under a hand that is still at the arm.
@@ -118,6 +124,7 @@ impl<C: Connector> Controller<C> {
             return Err(TorqueError::Refused(refusal));
         }
         self.shaper.hold(&present);
+        self.readings.reset();
         let held = self.shaper.targets().copied().unwrap_or(present);
         let goals =
             std::array::from_fn(|joint| self.calibration.ticks_from_radians(joint, held[joint]));
@@ -133,6 +140,43 @@ impl<C: Connector> Controller<C> {
         Ok(())
     }
 
+    /// Where the joints are, for the goal torque comes on with: two consecutive readings that
+    /// agree (a single misread must not become the pose the arm is pulled to), tried a few times.
+    fn steady_positions(&mut self) -> Result<JointPositions, TorqueError> {
+        let mut disagreement = String::new();
+        for _ in 0..STEADY_ATTEMPTS {
+            let mut pair = ReadingFilter::default();
+            let mut positions = None;
+            for _ in 0..2 {
+                let Link::Up(arm) = &mut self.link else {
+                    return Err(TorqueError::Unsteady("disconnected".to_owned()));
+                };
+                let ticks = arm.read_positions()?;
+                if let Some(problem) = implausible(&self.calibration, &ticks, arm) {
+                    self.torque.wanted = false;
+                    return Err(TorqueError::Implausible(format!(
+                        "torque refused: {problem}"
+                    )));
+                }
+                let radians: JointPositions = std::array::from_fn(|joint| {
+                    self.calibration.radians_from_ticks(joint, ticks[joint])
+                });
+                positions = match pair.check(&radians, Instant::now()) {
+                    Ok(()) => Some(radians),
+                    Err(why) => {
+                        self.shaper.counters.implausible_readings += 1;
+                        disagreement = why;
+                        None
+                    }
+                };
+            }
+            if let Some(positions) = positions {
+                return Ok(positions);
+            }
+        }
+        Err(TorqueError::Unsteady(disagreement))
+    }
+
     /// Torque off on every servo whatever fails; `None` when the link is down (then a broadcast
     /// on a freshly opened port was tried).
     pub(super) fn torque_off_everywhere(&mut self) -> Option<TorqueOffReport> {
@@ -142,7 +186,11 @@ impl<C: Connector> Controller<C> {
                 let report = arm.torque_off_everywhere();
                 if report.broadcast_failed {
                     // The port itself failed: a fresh one may still reach the servos.
-                    let _ = reopen_and_broadcast_torque_off(&mut self.connector, self.settings.bus);
+                    if let Err(error) =
+                        reopen_and_broadcast_torque_off(&mut self.connector, self.settings.bus)
+                    {
+                        tracing::warn!(%error, "torque off broadcast on a reopened port failed");
+                    }
                 }
                 Some(report)
             }
