@@ -18,68 +18,23 @@ No DDS here, but the directory's conftest wants the private network namespace al
 
 from __future__ import annotations
 
-import subprocess
-import threading
 import time
-from pathlib import Path
 
 import pytest
 import scservo_sdk as scs  # feetech-servo-sdk, pinned in scripts/requirements-ros.txt
-from harness import node_binary
+from driver_harness import ServoEmulator
+from harness import JOINT_NAMES
 
-JOINTS = ["shoulder_pan", "shoulder_lift", "elbow_flex", "wrist_flex", "wrist_roll", "gripper"]
 # Control table addresses (STS3215).
 HOMING_OFFSET, PROTECTION_TIME, TORQUE_ENABLE, GOAL_POSITION = 31, 35, 40, 42
 PRESENT_POSITION, PRESENT_LOAD, PRESENT_CURRENT = 56, 60, 69
 OVERLOAD = 0x20
 
 
-class Emulator:
-    """so101_servo_emulator on a pty behind `link`; `command()` sends one control line."""
-
-    def __init__(self, tmp_path: Path, *args: str):
-        self.link = tmp_path / "servo_bus"
-        self.log_path = tmp_path / "emulator.log"
-        self._log = open(self.log_path, "wb")  # noqa: SIM115 - open for the process lifetime, closed in stop()
-        self.proc = subprocess.Popen(
-            [str(node_binary("so101_servo_emulator")), "--link", str(self.link), *args],
-            stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=self._log, text=True, bufsize=1)
-        first = self._readline()
-        assert first.startswith("PTY "), f"no pty announced: {first!r}\n{self.log_tail()}"
-
-    def _readline(self, timeout: float = 10.0) -> str:
-        line: list[str] = []
-        reader = threading.Thread(target=lambda: line.append(self.proc.stdout.readline()), daemon=True)
-        reader.start()
-        reader.join(timeout)
-        assert line, f"the emulator did not answer within {timeout} s\n{self.log_tail()}"
-        return line[0].strip()
-
-    def command(self, line: str) -> str:
-        self.proc.stdin.write(line + "\n")
-        self.proc.stdin.flush()
-        answer = self._readline()
-        assert not answer.startswith("error"), f"{line!r}: {answer}"
-        return answer
-
-    def log_tail(self) -> str:
-        return self.log_path.read_text(errors="replace")[-3000:]
-
-    def stop(self) -> None:
-        if self.proc.poll() is None:
-            try:
-                self.proc.stdin.write("quit\n")
-                self.proc.stdin.flush()
-                self.proc.wait(timeout=5)
-            except (OSError, subprocess.TimeoutExpired):
-                self.proc.kill()
-                self.proc.wait()
-        self._log.close()
-
-
 @pytest.fixture
 def emulator(tmp_path):
-    emulator = Emulator(tmp_path)  # six factory servos, ids 1..6, realistic wire timing
+    # Six factory servos, ids 1..6, realistic wire timing.
+    emulator = ServoEmulator(tmp_path / "servo_bus", tmp_path / "emulator.log")
     try:
         yield emulator
     finally:
@@ -104,7 +59,7 @@ def lerobot_bus(emulator):
     from lerobot.motors import Motor, MotorNormMode
     from lerobot.motors.feetech import FeetechMotorsBus
 
-    motors = {name: Motor(index + 1, "sts3215", MotorNormMode.DEGREES) for index, name in enumerate(JOINTS)}
+    motors = {name: Motor(index + 1, "sts3215", MotorNormMode.DEGREES) for index, name in enumerate(JOINT_NAMES)}
     bus = FeetechMotorsBus(str(emulator.link), motors)
     bus.connect()
     try:

@@ -66,11 +66,6 @@ impl GoalShaper {
         self.config.max_step
     }
 
-    /// Changes `max_step` (a ceiling is the caller's to enforce).
-    pub fn set_max_step(&mut self, max_step: f64) {
-        self.config.max_step = max_step;
-    }
-
     /// Makes the present position the target (after connecting, enabling torque, reconnecting);
     /// the servos' goals are being set to it, so it is also the previous goal.
     pub fn hold(&mut self, present: &JointPositions) {

@@ -11,7 +11,7 @@ use std::{
     time::{Duration, Instant},
 };
 
-use so101_core::command::targets_from_joint_state;
+use so101_core::{command::targets_from_joint_state, robot::JOINT_NAMES};
 use so101_feetech_driver::{
     arm::{ArmSettings, CalibrationWrite},
     bus::BusConfig,
@@ -116,6 +116,19 @@ fn torque(servos: &InProcessBus) -> Vec<i32> {
     })
 }
 
+/// Cycles until torque is on again (after a reconnect), 2 s at most.
+fn cycle_until_torque_is_on(controller: &mut Controller<InProcessBus>) {
+    let deadline = Instant::now() + Duration::from_secs(2);
+    while !controller.status().torque_on {
+        assert!(
+            Instant::now() < deadline,
+            "{:?}",
+            controller.status().problem
+        );
+        cycles(controller, 1);
+    }
+}
+
 /// Sends a command; whether the controller could take it (it knows where the arm is).
 fn command(controller: &mut Controller<InProcessBus>, joint: &str, value: f64) -> bool {
     let targets = targets_from_joint_state(&[joint.to_owned()], &[value]).unwrap();
@@ -213,15 +226,7 @@ fn a_lost_link_turns_torque_off_and_the_wish_returns_with_the_arm() {
     }
     assert_eq!(torque(&servos), [0; 6], "nobody supervises the servos now");
     servos.with_bus(|bus| bus.slots[0].silent = false);
-    let deadline = Instant::now() + Duration::from_secs(2);
-    while !controller.status().torque_on {
-        assert!(
-            Instant::now() < deadline,
-            "{:?}",
-            controller.status().problem
-        );
-        cycles(&mut controller, 1);
-    }
+    cycle_until_torque_is_on(&mut controller);
     assert_eq!(torque(&servos), [1; 6]);
     assert_eq!(controller.status().reconnects, 1);
     assert_no_jump(&servos);
@@ -287,15 +292,7 @@ fn another_arm_after_a_reconnect_is_refused_untouched_until_the_right_one_return
     );
     // The arm this calibration belongs to comes back: taken, torque as the user asked.
     servos.with_bus(|bus| write_calibration(bus, &calibration()));
-    let deadline = Instant::now() + Duration::from_secs(2);
-    while !controller.status().torque_on {
-        assert!(
-            Instant::now() < deadline,
-            "{:?}",
-            controller.status().problem
-        );
-        cycles(&mut controller, 1);
-    }
+    cycle_until_torque_is_on(&mut controller);
     assert!(controller.is_connected());
     assert_no_jump(&servos);
 }
@@ -362,16 +359,8 @@ fn no_goal_ever_moves_a_joint_more_than_max_step_whatever_is_commanded() {
     let servos = calibrated_servos();
     let mut controller = start(&servos, config());
     servos.with_bus(|bus| bus.faults.drop_probability = 0.05);
-    let joints = [
-        "shoulder_pan",
-        "shoulder_lift",
-        "elbow_flex",
-        "wrist_flex",
-        "wrist_roll",
-        "gripper",
-    ];
     for step in 0..150_usize {
-        let joint = joints[step % joints.len()];
+        let joint = JOINT_NAMES[step % JOINT_NAMES.len()];
         let value = [3.0, -3.0, 0.5, -0.2, 1.0][step % 5];
         command(&mut controller, joint, value);
         cycles(&mut controller, 1);
@@ -406,15 +395,7 @@ fn an_adapter_unplugged_mid_run_is_survived_and_the_arm_taken_back_without_a_jum
     cycles(&mut controller, 3);
     assert!(!controller.is_connected());
     servos.plug_adapter();
-    let deadline = Instant::now() + Duration::from_secs(2);
-    while !controller.status().torque_on {
-        assert!(
-            Instant::now() < deadline,
-            "{:?}",
-            controller.status().problem
-        );
-        cycles(&mut controller, 1);
-    }
+    cycle_until_torque_is_on(&mut controller);
     cycles(&mut controller, 1);
     assert!(command(&mut controller, "elbow_flex", -0.6));
     cycles(&mut controller, 20);
@@ -451,15 +432,7 @@ fn an_adapter_pulled_out_in_the_middle_of_a_write_is_survived() {
     cycles(&mut controller, 2);
     assert!(!controller.is_connected());
     servos.plug_adapter();
-    let deadline = Instant::now() + Duration::from_secs(2);
-    while !controller.status().torque_on {
-        assert!(
-            Instant::now() < deadline,
-            "{:?}",
-            controller.status().problem
-        );
-        cycles(&mut controller, 1);
-    }
+    cycle_until_torque_is_on(&mut controller);
     cycles(&mut controller, 1);
     assert!(command(&mut controller, "wrist_flex", -0.7));
     cycles(&mut controller, 20);
