@@ -81,7 +81,6 @@ fn config() -> ControllerConfig {
         reopen_after: Duration::from_millis(100),
         reconnect_interval: Duration::from_millis(20),
         telemetry_period: Duration::from_millis(100),
-        last_words: false,
     }
 }
 

@@ -58,7 +58,6 @@ fn a_panic_broadcasts_torque_off_to_every_servo() {
             reopen_after: Duration::from_secs(1),
             reconnect_interval: Duration::from_millis(100),
             telemetry_period: Duration::from_millis(100),
-            last_words: true,
         },
         std::time::Instant::now(),
     )
@@ -74,6 +73,7 @@ fn a_panic_broadcasts_torque_off_to_every_servo() {
     assert_eq!(torque(), [1; 6]);
     // The node's hook also ends the process afterwards; a test cannot watch that from inside.
     emergency::install_panic_hook(false);
+    emergency::set_line(controller.last_words_line());
     let crashed = std::panic::catch_unwind(|| panic!("a bug in the control loop"));
     assert!(crashed.is_err());
     assert_eq!(torque(), [0; 6], "the panic left torque on");

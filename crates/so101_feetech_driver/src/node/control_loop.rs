@@ -84,7 +84,6 @@ pub fn run(args: RunArgs) -> Result<()> {
         reopen_after: Duration::from_secs_f64(args.reopen_after),
         reconnect_interval: Duration::from_secs_f64(args.reconnect_interval),
         telemetry_period: Duration::from_secs_f64(1.0 / args.telemetry_rate),
-        last_words: !args.keep_torque_on_exit,
     };
     let controller = Controller::start(connector, settings, calibration, config, Instant::now())
         .with_context(|| format!("cannot start the arm on {}", args.port.port.display()))?;
@@ -117,9 +116,11 @@ pub fn run(args: RunArgs) -> Result<()> {
         stats: CycleStats::new(Instant::now()),
         next_diagnostics: Instant::now() + DIAGNOSTICS_PERIOD,
         warnings: RateLimiter::new(Duration::from_secs(2)),
+        last_words_generation: None,
         args,
         _node: node,
     };
+    driver.keep_last_words_line();
     let summary = driver.run(&shutdown);
     driver.finish(summary, started_cpu)
 }
@@ -135,6 +136,8 @@ struct Driver {
     stats: CycleStats,
     next_diagnostics: Instant,
     warnings: RateLimiter,
+    /// The link generation whose port handle the last words go out on.
+    last_words_generation: Option<u64>,
     // Declared last: dropped after the publishers and readers that belong to it.
     _node: RosNode,
 }
@@ -178,6 +181,7 @@ impl Driver {
         self.take_commands(now);
         self.serve_torque_requests();
         let output = self.controller.cycle(now);
+        self.keep_last_words_line();
         if let Some(positions) = &output.positions {
             self.publish_joints(positions, &output);
         }
@@ -188,6 +192,20 @@ impl Driver {
             self.next_diagnostics = now + DIAGNOSTICS_PERIOD;
             self.publish_diagnostics();
         }
+    }
+
+    /// Points the last words (panic, second signal) at the current port handle, unless the user
+    /// wants torque kept on exit.
+    fn keep_last_words_line(&mut self) {
+        let generation = self.controller.link_generation();
+        if self.last_words_generation == Some(generation) {
+            return;
+        }
+        self.last_words_generation = Some(generation);
+        let line = (!self.args.keep_torque_on_exit)
+            .then(|| self.controller.last_words_line())
+            .flatten();
+        emergency::set_line(line);
     }
 
     fn take_commands(&mut self, now: Instant) {
@@ -279,6 +297,7 @@ impl Driver {
     /// Torque off (unless asked to keep it), then the exit summary.
     fn finish(mut self, cycles: CycleSummary, started_cpu: Duration) -> Result<()> {
         self.controller.shutdown(self.args.keep_torque_on_exit);
+        emergency::set_line(None);
         let cpu = cpu_time().saturating_sub(started_cpu);
         let report = self.report();
         let summary = RunSummary {

@@ -8,8 +8,7 @@ use so101_core::robot::{JOINT_COUNT, JOINT_NAMES};
 use super::{Controller, Link};
 use crate::{
     arm::{connect_bus, Arm, ArmError},
-    bus::{BusError, Connector, Transport},
-    node::emergency,
+    bus::{BusError, Connector},
 };
 
 impl<C: Connector> Controller<C> {
@@ -54,7 +53,7 @@ impl<C: Connector> Controller<C> {
         self.torque.on = false;
         self.torque.uncertain = true;
         self.answering = [false; JOINT_COUNT];
-        emergency::set_line(None);
+        self.link_generation += 1;
     }
 
     pub(super) fn try_reconnect(&mut self, now: Instant) {
@@ -73,7 +72,7 @@ impl<C: Connector> Controller<C> {
                 self.last_good_read = now;
                 self.problem = None;
                 self.readings.reset();
-                self.arm_last_words();
+                self.link_generation += 1;
                 tracing::info!(reconnects = self.reconnects, "bus reconnected");
                 self.torque.next_attempt = now;
                 self.reconcile_torque(now);
@@ -93,15 +92,6 @@ impl<C: Connector> Controller<C> {
                 }
                 self.problem = Some(problem);
             }
-        }
-    }
-
-    pub(super) fn arm_last_words(&self) {
-        if !self.config.last_words {
-            return;
-        }
-        if let Link::Up(arm) = &self.link {
-            emergency::set_line(arm.bus.transport().emergency_writer());
         }
     }
 }

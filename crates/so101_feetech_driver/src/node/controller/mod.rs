@@ -22,7 +22,7 @@ use so101_core::{
 mod link;
 mod torque;
 
-use super::{diagnostics::ServoReport, emergency};
+use super::diagnostics::ServoReport;
 use crate::{
     arm::{
         connect_bus, reopen_and_broadcast_torque_off, Arm, ArmError, ArmSettings, CalibrationWrite,
@@ -56,8 +56,6 @@ pub struct ControllerConfig {
     pub reopen_after: Duration,
     pub reconnect_interval: Duration,
     pub telemetry_period: Duration,
-    /// Broadcast torque off from a panic or a second signal (the node; not its tests).
-    pub last_words: bool,
 }
 
 /// What the user asked for and what the servos have.
@@ -172,6 +170,8 @@ pub struct Controller<C: Connector> {
     torque_problem: Option<TorqueProblem>,
     /// Bus counters of earlier connections.
     bus_totals: BusStats,
+    /// Bumped whenever the link goes up or down (a new port handle, or none).
+    link_generation: u64,
 }
 
 impl<C: Connector> Controller<C> {
@@ -222,8 +222,8 @@ impl<C: Connector> Controller<C> {
             problem: None,
             torque_problem: None,
             bus_totals: BusStats::default(),
+            link_generation: 0,
         };
-        controller.arm_last_words();
         match controller.apply_torque_wish() {
             Ok(()) | Err(TorqueError::Refused(_)) => Ok(controller),
             Err(error) => {
@@ -321,7 +321,6 @@ impl<C: Connector> Controller<C> {
                 None => tracing::warn!("disconnected on exit: torque off was broadcast"),
             }
         }
-        emergency::set_line(None);
     }
 
     pub fn status(&self) -> ControllerStatus {
@@ -353,6 +352,20 @@ impl<C: Connector> Controller<C> {
                 position_ticks: self.present.map(|present| present.ticks[joint]),
                 telemetry: self.telemetry.map(|(telemetry, _)| telemetry[joint]),
             }),
+        }
+    }
+
+    /// Changes whenever the link goes up or down: the moment to take a new [`Self::last_words_line`].
+    pub fn link_generation(&self) -> u64 {
+        self.link_generation
+    }
+
+    /// A second handle on the bus for last words (a broadcast torque off as the process dies);
+    /// `None` while disconnected.
+    pub fn last_words_line(&self) -> Option<Box<dyn std::io::Write + Send>> {
+        match &self.link {
+            Link::Up(arm) => arm.bus.transport().emergency_writer(),
+            Link::Down { .. } => None,
         }
     }
 
