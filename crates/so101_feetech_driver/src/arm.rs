@@ -6,7 +6,7 @@ use std::{path::Path, time::Duration};
 use so101_core::robot::{JOINT_COUNT, JOINT_NAMES};
 
 use crate::{
-    bus::{BusConfig, BusError, Connector, SerialTransport, ServoBus, Transport},
+    bus::{BusConfig, BusError, Connector, SerialConnector, SerialTransport, ServoBus, Transport},
     calibration::{ArmCalibration, ArmRole, MotorCalibration},
     protocol::registers::{self, Register, STS3215_MODEL},
 };
@@ -79,11 +79,11 @@ pub struct ArmSettings {
 
 /// Opens the port with the bus settings.
 pub fn open_bus(path: &Path, config: BusConfig) -> Result<ServoBus, ArmError> {
-    let transport = SerialTransport::open(path, config.baud).map_err(|source| ArmError::Open {
-        path: path.display().to_string(),
-        source: source.into(),
-    })?;
-    Ok(ServoBus::new(transport, config))
+    let mut serial = SerialConnector {
+        path: path.to_owned(),
+        baud: config.baud,
+    };
+    connect_bus(&mut serial, config)
 }
 
 /// Opens a bus through `connector`.
@@ -218,12 +218,7 @@ impl<T: Transport> Arm<T> {
         calibration: ArmCalibration,
         write: CalibrationWrite,
     ) -> Result<Self, ArmError> {
-        let mut arm = Self::find(bus, calibration)?;
-        let differences = arm.calibration_differences()?;
-        if !differences.is_empty() && write == CalibrationWrite::Refused {
-            arm.torque_off_everywhere();
-            return Err(ArmError::CalibrationDiffers { differences });
-        }
+        let mut arm = Self::find_matching(bus, calibration, write)?;
         arm.configure(settings, write)?;
         Ok(arm)
     }
@@ -237,12 +232,7 @@ impl<T: Transport> Arm<T> {
         settings: &ArmSettings,
         calibration: ArmCalibration,
     ) -> Result<Self, ArmError> {
-        let mut arm = Self::find(bus, calibration)?;
-        let differences = arm.calibration_differences()?;
-        if !differences.is_empty() {
-            arm.torque_off_everywhere();
-            return Err(ArmError::CalibrationDiffers { differences });
-        }
+        let mut arm = Self::find_matching(bus, calibration, CalibrationWrite::Refused)?;
         for id in arm.ids {
             arm.bus.write(id, registers::ACCELERATION, 254)?;
         }
@@ -252,6 +242,22 @@ impl<T: Transport> Arm<T> {
             settings.gripper_torque_limit,
         )?;
         arm.bus.set_return_delay(Duration::ZERO);
+        Ok(arm)
+    }
+
+    /// Finds the six servos and compares their EPROM calibration with the file: servos that hold
+    /// another one are refused (torque off, nothing written) unless `write` allows writing it.
+    fn find_matching(
+        bus: ServoBus<T>,
+        calibration: ArmCalibration,
+        write: CalibrationWrite,
+    ) -> Result<Self, ArmError> {
+        let mut arm = Self::find(bus, calibration)?;
+        let differences = arm.calibration_differences()?;
+        if !differences.is_empty() && write == CalibrationWrite::Refused {
+            arm.torque_off_everywhere();
+            return Err(ArmError::CalibrationDiffers { differences });
+        }
         Ok(arm)
     }
 

@@ -211,6 +211,16 @@ impl ArmCalibration {
         motor.clamp_ticks(ticks.round().clamp(0.0, f64::from(MAX_TICKS)) as i32)
     }
 
+    /// Every joint's position in rad from the ticks its servo reports.
+    pub fn positions_from_ticks(&self, ticks: &[i32; JOINT_COUNT]) -> [f64; JOINT_COUNT] {
+        std::array::from_fn(|joint| self.radians_from_ticks(joint, ticks[joint]))
+    }
+
+    /// Every joint's goal in ticks for positions in rad, clamped into the calibrated ranges.
+    pub fn ticks_from_positions(&self, positions: &[f64; JOINT_COUNT]) -> [i32; JOINT_COUNT] {
+        std::array::from_fn(|joint| self.ticks_from_radians(joint, positions[joint]))
+    }
+
     /// Joint velocity in rad/s from Present_Velocity (ticks/s).
     pub fn radians_per_second(&self, joint: usize, ticks_per_second: i32) -> f64 {
         let sign = if joint == GRIPPER && self.motors[joint].inverted() {

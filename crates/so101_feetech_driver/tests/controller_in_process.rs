@@ -6,12 +6,12 @@
 // Test helpers fail loudly: a panic is the right report here.
 #![allow(clippy::unwrap_used)]
 
-use std::{
-    path::Path,
-    time::{Duration, Instant},
-};
+use std::time::{Duration, Instant};
 
 use so101_core::{command::targets_from_joint_state, robot::JOINT_NAMES};
+mod common;
+
+use common::calibration;
 use so101_feetech_driver::{
     arm::{ArmSettings, CalibrationWrite},
     bus::BusConfig,
@@ -22,21 +22,9 @@ use so101_feetech_driver::{
     safety::SafetyConfig,
 };
 
-const CALIBRATION: &str = r#"{
-    "shoulder_pan": {"id": 1, "drive_mode": 0, "homing_offset": 100, "range_min": 1000, "range_max": 3000},
-    "shoulder_lift": {"id": 2, "drive_mode": 0, "homing_offset": -200, "range_min": 900, "range_max": 3100},
-    "elbow_flex": {"id": 3, "drive_mode": 0, "homing_offset": 0, "range_min": 1000, "range_max": 3000},
-    "wrist_flex": {"id": 4, "drive_mode": 0, "homing_offset": 0, "range_min": 1000, "range_max": 3000},
-    "wrist_roll": {"id": 5, "drive_mode": 0, "homing_offset": 0, "range_min": 0, "range_max": 4095},
-    "gripper": {"id": 6, "drive_mode": 0, "homing_offset": 0, "range_min": 2000, "range_max": 3000}
-}"#;
 /// 0.05 rad in ticks (4095 ticks per turn): the step every goal is audited against.
 const MAX_STEP: f64 = 0.05;
 const MAX_STEP_TICKS: i32 = 33;
-
-fn calibration() -> ArmCalibration {
-    ArmCalibration::from_json(CALIBRATION, Path::new("test.json")).unwrap()
-}
 
 /// Six servos calibrated with `calibration()`, shafts at mid-range.
 fn calibrated_servos() -> InProcessBus {

@@ -6,10 +6,13 @@
 #![allow(clippy::unwrap_used)]
 
 use std::{
-    path::{Path, PathBuf},
+    path::PathBuf,
     time::{Duration, Instant},
 };
 
+mod common;
+
+use common::calibration;
 use so101_feetech_driver::{
     arm::{open_bus, Arm, ArmSettings, CalibrationWrite},
     bus::{BusConfig, BusError},
@@ -22,15 +25,6 @@ use so101_feetech_driver::{
         setup_motors::{assign, SetupError},
     },
 };
-
-const CALIBRATION: &str = r#"{
-    "shoulder_pan": {"id": 1, "drive_mode": 0, "homing_offset": 100, "range_min": 1000, "range_max": 3000},
-    "shoulder_lift": {"id": 2, "drive_mode": 0, "homing_offset": -200, "range_min": 900, "range_max": 3100},
-    "elbow_flex": {"id": 3, "drive_mode": 0, "homing_offset": 0, "range_min": 1000, "range_max": 3000},
-    "wrist_flex": {"id": 4, "drive_mode": 0, "homing_offset": 0, "range_min": 1000, "range_max": 3000},
-    "wrist_roll": {"id": 5, "drive_mode": 0, "homing_offset": 0, "range_min": 0, "range_max": 4095},
-    "gripper": {"id": 6, "drive_mode": 0, "homing_offset": 0, "range_min": 2000, "range_max": 3000}
-}"#;
 
 struct Bench {
     emulator: Emulator,
@@ -51,10 +45,6 @@ fn emulator(config: EmulatorConfig) -> Bench {
         _dir: dir,
         link,
     }
-}
-
-fn calibration() -> ArmCalibration {
-    ArmCalibration::from_json(CALIBRATION, Path::new("test.json")).unwrap()
 }
 
 fn settings(retries: u32) -> ArmSettings {

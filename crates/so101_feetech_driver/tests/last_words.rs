@@ -4,12 +4,14 @@
 // Test helpers fail loudly: a panic is the right report here.
 #![allow(clippy::unwrap_used)]
 
-use std::{path::Path, time::Duration};
+use std::time::Duration;
+
+mod common;
 
 use so101_feetech_driver::{
     arm::{ArmSettings, CalibrationWrite},
     bus::BusConfig,
-    calibration::{ArmCalibration, ArmRole},
+    calibration::ArmRole,
     emulator::{BusEmulator, InProcessBus, Timing},
     node::{
         controller::{Controller, ControllerConfig},
@@ -19,15 +21,6 @@ use so101_feetech_driver::{
     safety::SafetyConfig,
 };
 
-const CALIBRATION: &str = r#"{
-    "shoulder_pan": {"id": 1, "drive_mode": 0, "homing_offset": 0, "range_min": 1000, "range_max": 3000},
-    "shoulder_lift": {"id": 2, "drive_mode": 0, "homing_offset": 0, "range_min": 1000, "range_max": 3000},
-    "elbow_flex": {"id": 3, "drive_mode": 0, "homing_offset": 0, "range_min": 1000, "range_max": 3000},
-    "wrist_flex": {"id": 4, "drive_mode": 0, "homing_offset": 0, "range_min": 1000, "range_max": 3000},
-    "wrist_roll": {"id": 5, "drive_mode": 0, "homing_offset": 0, "range_min": 0, "range_max": 4095},
-    "gripper": {"id": 6, "drive_mode": 0, "homing_offset": 0, "range_min": 2000, "range_max": 3000}
-}"#;
-
 #[test]
 fn a_panic_broadcasts_torque_off_to_every_servo() {
     let servos = InProcessBus::new(BusEmulator::with_factory_servos(
@@ -35,7 +28,7 @@ fn a_panic_broadcasts_torque_off_to_every_servo() {
         Timing::Instant,
         1,
     ));
-    let calibration = ArmCalibration::from_json(CALIBRATION, Path::new("test.json")).unwrap();
+    let calibration = common::calibration();
     let controller = Controller::start(
         servos.clone(),
         ArmSettings {

@@ -39,11 +39,8 @@ impl<C: Connector> Controller<C> {
     /// The link is lost: torque off for every servo that can still hear (nobody supervises them
     /// now), then the port is closed and reopened later.
     pub(super) fn disconnect(&mut self, now: Instant, problem: String) {
-        let wanted = self.torque.wanted;
-        self.torque.wanted = false;
+        // The wish stays: what the user asked for comes back with the arm.
         self.torque_off_everywhere();
-        // What the user asked for comes back with the arm.
-        self.torque.wanted = wanted;
         if let Link::Up(arm) = &self.link {
             self.bus_totals = self.bus_totals.plus(arm.bus.stats());
         }

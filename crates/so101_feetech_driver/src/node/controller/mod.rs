@@ -388,9 +388,7 @@ impl<C: Connector> Controller<C> {
         };
         let checked = implausible(&self.calibration, &ticks, arm).map_or_else(
             || {
-                let radians: JointPositions = std::array::from_fn(|joint| {
-                    self.calibration.radians_from_ticks(joint, ticks[joint])
-                });
+                let radians: JointPositions = self.calibration.positions_from_ticks(&ticks);
                 self.readings.check(&radians, now).map(|()| radians)
             },
             Err,
@@ -417,9 +415,7 @@ impl<C: Connector> Controller<C> {
         // Goals first, the report after: the servos should not wait for the publisher.
         if !self.config.leader && self.torque.on {
             let goals = self.shaper.goals(&radians, now);
-            let goal_ticks = std::array::from_fn(|joint| {
-                self.calibration.ticks_from_radians(joint, goals[joint])
-            });
+            let goal_ticks = self.calibration.ticks_from_positions(&goals);
             let Link::Up(arm) = &mut self.link else {
                 return Some(radians);
             };

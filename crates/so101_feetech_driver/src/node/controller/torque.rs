@@ -126,8 +126,7 @@ impl<C: Connector> Controller<C> {
         self.shaper.hold(&present);
         self.readings.reset();
         let held = self.shaper.targets().copied().unwrap_or(present);
-        let goals =
-            std::array::from_fn(|joint| self.calibration.ticks_from_radians(joint, held[joint]));
+        let goals = self.calibration.ticks_from_positions(&held);
         let Link::Up(arm) = &mut self.link else {
             return Ok(());
         };
@@ -158,9 +157,7 @@ impl<C: Connector> Controller<C> {
                         "torque refused: {problem}"
                     )));
                 }
-                let radians: JointPositions = std::array::from_fn(|joint| {
-                    self.calibration.radians_from_ticks(joint, ticks[joint])
-                });
+                let radians: JointPositions = self.calibration.positions_from_ticks(&ticks);
                 positions = match pair.check(&radians, Instant::now()) {
                     Ok(()) => Some(radians),
                     Err(why) => {
