@@ -59,6 +59,17 @@ fn settings(retries: u32) -> ArmSettings {
     }
 }
 
+/// The arm on the bench's emulator, configured and calibrated (the servos start from the factory).
+fn connect(bench: &Bench, retries: u32) -> Arm {
+    Arm::connect(
+        &bench.link,
+        &settings(retries),
+        calibration(),
+        CalibrationWrite::Allowed,
+    )
+    .unwrap()
+}
+
 fn slot(bench: &Bench, index: usize) -> SlotSnapshot {
     bench.emulator.snapshot()[index].clone()
 }
@@ -73,13 +84,7 @@ fn connect_configures_the_servos_like_lerobot_and_writes_the_calibration() {
         timing: Timing::Realistic { baud: 1_000_000 },
         ..EmulatorConfig::default()
     });
-    let arm = Arm::connect(
-        &bench.link,
-        &settings(2),
-        calibration(),
-        CalibrationWrite::Allowed,
-    )
-    .unwrap();
+    let arm = connect(&bench, 2);
     assert_eq!(arm.servos.len(), 6);
     assert!(arm.servos.iter().all(|servo| servo.model == 777));
     for (index, servo) in bench.emulator.snapshot().iter().enumerate() {
@@ -111,13 +116,7 @@ fn connect_configures_the_servos_like_lerobot_and_writes_the_calibration() {
 #[test]
 fn goals_written_with_torque_on_move_the_servos() {
     let bench = emulator(EmulatorConfig::default());
-    let mut arm = Arm::connect(
-        &bench.link,
-        &settings(2),
-        calibration(),
-        CalibrationWrite::Allowed,
-    )
-    .unwrap();
+    let mut arm = connect(&bench, 2);
     let start = arm.read_positions().unwrap();
     // The servo subtracts its homing offset: the shaft at 2048 reads 2048 - 100 on shoulder_pan.
     assert_eq!(start[0], 2048 - 100);
@@ -155,13 +154,7 @@ fn lost_replies_are_retried_and_counted() {
         seed: 7,
         ..EmulatorConfig::default()
     });
-    let mut arm = Arm::connect(
-        &bench.link,
-        &settings(3),
-        calibration(),
-        CalibrationWrite::Allowed,
-    )
-    .unwrap();
+    let mut arm = connect(&bench, 3);
     control(&bench, "drop 0.05");
     let mut failures = 0;
     for _ in 0..200 {
@@ -182,13 +175,7 @@ fn lost_replies_are_retried_and_counted() {
 #[test]
 fn no_answer_at_all_fails_after_the_retries_and_names_the_servos() {
     let bench = emulator(EmulatorConfig::default());
-    let mut arm = Arm::connect(
-        &bench.link,
-        &settings(1),
-        calibration(),
-        CalibrationWrite::Allowed,
-    )
-    .unwrap();
+    let mut arm = connect(&bench, 1);
     control(&bench, "drop 1");
     match arm.read_positions() {
         Err(BusError::NoAnswer {
@@ -209,13 +196,7 @@ fn no_answer_at_all_fails_after_the_retries_and_names_the_servos() {
 #[test]
 fn a_silent_servo_is_named_and_the_others_still_answer_next_time() {
     let bench = emulator(EmulatorConfig::default());
-    let mut arm = Arm::connect(
-        &bench.link,
-        &settings(1),
-        calibration(),
-        CalibrationWrite::Allowed,
-    )
-    .unwrap();
+    let mut arm = connect(&bench, 1);
     control(&bench, "silent 3 on");
     match arm.read_positions() {
         Err(BusError::NoAnswer { missing, .. }) => assert_eq!(missing, [3]),
@@ -231,13 +212,7 @@ fn corrupted_replies_are_detected_never_decoded() {
         seed: 3,
         ..EmulatorConfig::default()
     });
-    let mut arm = Arm::connect(
-        &bench.link,
-        &settings(1),
-        calibration(),
-        CalibrationWrite::Allowed,
-    )
-    .unwrap();
+    let mut arm = connect(&bench, 1);
     let good = arm.read_positions().unwrap();
     control(&bench, "corrupt 1");
     assert!(matches!(
@@ -257,13 +232,7 @@ fn corrupted_replies_are_detected_never_decoded() {
 #[test]
 fn garbage_bytes_and_late_replies_do_not_desynchronise_the_bus() {
     let bench = emulator(EmulatorConfig::default());
-    let mut arm = Arm::connect(
-        &bench.link,
-        &settings(1),
-        calibration(),
-        CalibrationWrite::Allowed,
-    )
-    .unwrap();
+    let mut arm = connect(&bench, 1);
     let good = arm.read_positions().unwrap();
     control(&bench, "garbage 40");
     assert_eq!(arm.read_positions().unwrap(), good);
@@ -279,13 +248,7 @@ fn garbage_bytes_and_late_replies_do_not_desynchronise_the_bus() {
 #[test]
 fn an_unplugged_adapter_is_reported_and_reattached_limp_until_torque_is_asked_for() {
     let bench = emulator(EmulatorConfig::default());
-    let mut arm = Arm::connect(
-        &bench.link,
-        &settings(1),
-        calibration(),
-        CalibrationWrite::Allowed,
-    )
-    .unwrap();
+    let mut arm = connect(&bench, 1);
     arm.torque_on().unwrap();
     control(&bench, "hangup 0.5");
     let deadline = Instant::now() + Duration::from_secs(2);
@@ -328,13 +291,7 @@ fn an_unplugged_adapter_is_reported_and_reattached_limp_until_torque_is_asked_fo
 #[test]
 fn another_arm_after_a_hangup_is_refused_its_eprom_untouched_and_its_torque_off() {
     let bench = emulator(EmulatorConfig::default());
-    let arm = Arm::connect(
-        &bench.link,
-        &settings(1),
-        calibration(),
-        CalibrationWrite::Allowed,
-    )
-    .unwrap();
+    let arm = connect(&bench, 1);
     drop(arm);
     // Another arm is plugged in: factory calibration (offset 0, limits 0..4095), torque on.
     let mut bus = open_bus(&bench.link, settings(1).bus).unwrap();
