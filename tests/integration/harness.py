@@ -166,6 +166,18 @@ class SimNode:
         return self._stop_result
 
 
+def wait_for_launcher(launcher: subprocess.Popen, timeout: float) -> str:
+    """Reads so101-launch's output (a text pipe) until it reports every node up; returns it."""
+    output = ""
+    deadline = time.monotonic() + timeout
+    while "all nodes up" not in output:
+        line = launcher.stdout.readline()
+        assert line or launcher.poll() is None, f"the launcher exited early:\n{output}"
+        output += line
+        assert time.monotonic() < deadline, f"not up within {timeout:.0f} s:\n{output}"
+    return output
+
+
 def stop_nodes(nodes: list[SimNode]) -> list[str]:
     """SIGINT to every node still running; what went wrong, for the fixture to report. A node must
     exit 0, unless its test set `node.exit_expected = True` (it was killed or meant to fail)."""

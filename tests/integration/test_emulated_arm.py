@@ -16,9 +16,8 @@ import os
 import signal
 import subprocess
 import sys
-import time
 
-from harness import REPO_ROOT, best_effort_qos, node_binary
+from harness import REPO_ROOT, best_effort_qos, node_binary, wait_for_launcher
 
 CALIBRATION = REPO_ROOT / "assets" / "emulated_arm" / "so101_calibration.json"
 RAD_PER_TICK = 2 * math.pi / 4095
@@ -54,12 +53,7 @@ def test_emulated_arm_comes_up_from_an_empty_home_with_matching_calibration(ros,
         cwd=tmp_path, env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
     output = ""
     try:
-        deadline = time.monotonic() + 60
-        while "all nodes up" not in output:
-            line = launcher.stdout.readline()
-            assert line or launcher.poll() is None, f"the launcher exited early:\n{output}"
-            output += line
-            assert time.monotonic() < deadline, f"not up within 60 s:\n{output}"
+        output = wait_for_launcher(launcher, 60.0)
         messages = states.wait_count(20, 10.0)
         launcher.send_signal(signal.SIGTERM)
         rest, _ = launcher.communicate(timeout=60)

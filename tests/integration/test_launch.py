@@ -16,7 +16,7 @@ from pathlib import Path
 import yaml
 
 from driver_harness import write_calibration
-from harness import best_effort_qos
+from harness import best_effort_qos, wait_for_launcher
 
 LAUNCH = Path(sys.executable).parent / "so101-launch"
 
@@ -74,12 +74,7 @@ def test_real_profile_on_the_emulator_stops_cleanly_on_sigterm(ros, tmp_path):
         stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
     output = ""
     try:
-        deadline = time.monotonic() + 60
-        while "all nodes up" not in output:
-            line = launcher.stdout.readline()
-            assert line or launcher.poll() is None, f"the launcher exited early:\n{output}"
-            output += line
-            assert time.monotonic() < deadline, f"not up within 60 s:\n{output}"
+        output = wait_for_launcher(launcher, 60.0)
         states.wait_count(50, 10.0)  # the driver reads the (emulated) arm
         time.sleep(1.0)
         launcher.send_signal(signal.SIGTERM)
