@@ -5,45 +5,16 @@ from __future__ import annotations
 
 import json
 import subprocess
-import threading
 import time
 
 from driver_harness import DRIVER_NAME, ServoEmulator
 from harness import node_binary, node_environment
+from tool_terminal import Terminal
 
 
-class Terminal:
-    """A tool process with stdin/stdout pipes; `expect` waits for text in its output."""
-
-    def __init__(self, *args: str, env=None):
-        self.proc = subprocess.Popen(
-            [str(node_binary(DRIVER_NAME)), *args],
-            stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
-            env=env or node_environment(), text=True, bufsize=0,
-        )
-        self.output = ""
-        self._lock = threading.Lock()
-        threading.Thread(target=self._pump, daemon=True).start()
-
-    def _pump(self):
-        while chunk := self.proc.stdout.read(1):
-            with self._lock:
-                self.output += chunk
-
-    def expect(self, text: str, timeout: float = 15.0) -> None:
-        deadline = time.monotonic() + timeout
-        while time.monotonic() < deadline:
-            with self._lock:
-                if text in self.output:
-                    return
-            if self.proc.poll() is not None:
-                break
-            time.sleep(0.02)
-        raise AssertionError(f"{text!r} not seen; output so far:\n{self.output}")
-
-    def press_enter(self) -> None:
-        self.proc.stdin.write("\n")
-        self.proc.stdin.flush()
+def tool(*args: str, env=None) -> Terminal:
+    """so101_feetech_driver ARGS as a user runs it in a terminal."""
+    return Terminal([str(node_binary(DRIVER_NAME)), *args], env=env or node_environment())
 
 
 def test_calibrate_in_a_terminal_writes_lerobots_file_and_the_servos(tmp_path):
@@ -53,7 +24,7 @@ def test_calibrate_in_a_terminal_writes_lerobots_file_and_the_servos(tmp_path):
         for servo_id, raw in enumerate(centre, start=1):
             emulator.command(f"move {servo_id} {raw}")
         env = {**node_environment(), "HF_LEROBOT_CALIBRATION": str(tmp_path / "cal")}
-        terminal = Terminal("calibrate", "--port", str(tmp_path / "bus"), "--robot-id", "desk_arm", env=env)
+        terminal = tool("calibrate", "--port", str(tmp_path / "bus"), "--robot-id", "desk_arm", env=env)
         terminal.expect("middle of its range")
         terminal.press_enter()
         terminal.expect("press Enter when done")
@@ -62,7 +33,7 @@ def test_calibrate_in_a_terminal_writes_lerobots_file_and_the_servos(tmp_path):
                 emulator.command(f"move {servo_id} {raw + delta}")
                 time.sleep(0.15)
         terminal.press_enter()
-        assert terminal.proc.wait(timeout=15) == 0, terminal.output
+        assert terminal.wait(15) == 0, terminal.text()
         path = tmp_path / "cal" / "robots" / "so_follower" / "desk_arm.json"
         calibration = json.loads(path.read_text())
         assert list(calibration) == ["shoulder_pan", "shoulder_lift", "elbow_flex", "wrist_flex", "wrist_roll", "gripper"]
@@ -76,7 +47,7 @@ def test_calibrate_in_a_terminal_writes_lerobots_file_and_the_servos(tmp_path):
                 assert (motor["range_min"], motor["range_max"]) == (2047 - 600 - 10 * (index + 1), 2047 + 700 + 10 * (index + 1))
             assert slots[index]["homing_offset"] == motor["homing_offset"]
             assert (slots[index]["min_position_limit"], slots[index]["max_position_limit"]) == (motor["range_min"], motor["range_max"])
-        assert "Calibration written" in terminal.output
+        assert "Calibration written" in terminal.text()
     finally:
         emulator.stop()
 
@@ -100,7 +71,7 @@ def test_setup_motors_assigns_the_id_of_the_one_connected_servo(tmp_path):
     # Two factory servos (both id 1); the user connects the gripper's first.
     emulator = ServoEmulator(tmp_path / "bus", tmp_path / "emu.log", "--ids", "1,1", "--plugged", "0", "--timing", "instant")
     try:
-        terminal = Terminal("setup-motors", "--port", str(tmp_path / "bus"), "--joints", "gripper,wrist_roll")
+        terminal = tool("setup-motors", "--port", str(tmp_path / "bus"), "--joints", "gripper,wrist_roll")
         terminal.expect("'gripper' servo ONLY")
         terminal.press_enter()
         terminal.expect("id 1 -> 6")
@@ -108,8 +79,8 @@ def test_setup_motors_assigns_the_id_of_the_one_connected_servo(tmp_path):
         emulator.command("plug 1")
         terminal.expect("'wrist_roll' servo ONLY")
         terminal.press_enter()
-        assert terminal.proc.wait(timeout=15) == 0, terminal.output
-        assert "id 1 -> 5" in terminal.output
+        assert terminal.wait(15) == 0, terminal.text()
+        assert "id 1 -> 5" in terminal.text()
         assert [slot["id"] for slot in emulator.slots()] == [6, 5]
     finally:
         emulator.stop()

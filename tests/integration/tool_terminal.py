@@ -28,7 +28,8 @@ class Terminal:
         )
         self.output = ""
         self._lock = threading.Lock()
-        threading.Thread(target=self._pump, daemon=True).start()
+        self._pump_thread = threading.Thread(target=self._pump, daemon=True)
+        self._pump_thread.start()
 
     def _pump(self) -> None:
         while chunk := self.proc.stdout.read(1):
@@ -45,7 +46,7 @@ class Terminal:
             if text in self.text():
                 return
             if self.proc.poll() is not None:
-                time.sleep(0.2)  # the pump may still hold the last bytes
+                self._drain(timeout)
                 if text in self.text():
                     return
                 break
@@ -62,8 +63,13 @@ class Terminal:
         except subprocess.TimeoutExpired:
             self.kill()
             raise AssertionError(f"{self.argv} did not end within {timeout} s; output:\n{self.text()}") from None
-        time.sleep(0.1)  # let the pump take the last bytes
+        self._drain(timeout)
         return code
+
+    def _drain(self, timeout: float) -> None:
+        """After the exit: the pump reads to the end of the pipe, so `output` holds everything the
+        command printed (asserting on it right after the exit could miss its tail)."""
+        self._pump_thread.join(timeout)
 
     def interrupt(self, timeout: float = 20.0) -> int:
         """Ctrl-C: SIGINT to the whole process group; the exit code."""
