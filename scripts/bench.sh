@@ -9,10 +9,11 @@
 #   scripts/bench.sh convert [--episodes N] [--sizes WxH,...] [--json FILE]
 set -euo pipefail
 . "$(dirname "${BASH_SOURCE[0]}")/common.sh"
+help_if_asked "${BASH_SOURCE[0]}" "$@"
 REPO_ROOT="${SO101_ROOT}"
 "${REPO_ROOT}/scripts/setup.sh"
 run() {
-    "${REPO_ROOT}/scripts/isolated" "${REPO_ROOT}/.venv/bin/python" "${REPO_ROOT}/scripts/bench_$1.py" \
+    "${REPO_ROOT}/scripts/isolated" "${REPO_ROOT}/.venv/bin/python" -m "so101.bench.$1" \
         --bin-dir "${CARGO_TARGET_DIR}/release" "${@:2}"
 }
 case "${1:-all}" in

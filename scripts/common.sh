@@ -1,3 +1,4 @@
+# shellcheck shell=bash
 # Sourced by the project's shell scripts: the checkout's root, its build directory, and helpers.
 #
 # Each checkout builds into its own directory under ~/.cache/so101 (outside the clone, so a CI
@@ -16,4 +17,16 @@ sha256_of() {
     else
         "${PYTHON:-python3}" -c 'import hashlib,sys; print(hashlib.sha256(open(sys.argv[1],"rb").read()).hexdigest())' "$1"
     fi
+}
+
+# `--help` or `-h` as the first argument of a script: print the script's header comment (its usage)
+# and exit, before any set-up runs. Called as: help_if_asked "${BASH_SOURCE[0]}" "$@"
+help_if_asked() {
+    case "${2:-}" in
+        -h | --help) ;;
+        *) return 0 ;;
+    esac
+    # Lines 2.. up to the first line that is not a comment, without the leading "# ".
+    sed -n '2,${/^#/!q;s/^# \{0,1\}//;p}' "$1"
+    exit 0
 }

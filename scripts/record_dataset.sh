@@ -17,7 +17,7 @@ seed=0
 output="runs/dataset-$(date +%Y%m%d-%H%M%S)"
 sim_args=()
 launch_args=()
-usage() { sed -n '2,9p' "${BASH_SOURCE[0]}" | sed 's/^# \{0,1\}//'; }
+usage() { help_if_asked "${BASH_SOURCE[0]}" --help; }
 while [ $# -gt 0 ]; do
     case "$1" in
         --episodes) episodes="$2"; shift 2 ;;

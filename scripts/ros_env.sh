@@ -1,3 +1,4 @@
+# shellcheck shell=bash
 # Source me (bash or zsh):  . scripts/ros_env.sh
 #
 # Environment of the project's rclpy side (.venv made by scripts/setup_python.sh).
@@ -9,7 +10,7 @@
 # works on its own; this file only adds what the project chooses:
 #   - the venv's bin/ first on PATH (python3, pytest),
 #   - RMW_IMPLEMENTATION=rmw_fastrtps_cpp (the only RMW installed; also the default),
-#   - FASTRTPS_DEFAULT_PROFILES_FILE = scripts/fastdds_profile.xml (4 MiB socket buffers, needed
+#   - FASTRTPS_DEFAULT_PROFILES_FILE = python/fastdds_profile.xml (4 MiB socket buffers, needed
 #     to receive large messages such as camera images from the Rust nodes).
 # Side effect of the bootstrapper to know: child processes of a venv Python inherit that
 # LD_LIBRARY_PATH (the integration tests strip it for the Rust node).
@@ -19,6 +20,7 @@
 if [ -n "${BASH_SOURCE:-}" ]; then
     _so101_here="${BASH_SOURCE[0]}"
 elif [ -n "${ZSH_VERSION:-}" ]; then
+    # shellcheck disable=SC2296  # zsh's own expansion: the sourced file's path
     _so101_here="${(%):-%x}"
 else
     _so101_here="$0"
@@ -35,5 +37,5 @@ else
     esac
 fi
 export RMW_IMPLEMENTATION=rmw_fastrtps_cpp
-export FASTRTPS_DEFAULT_PROFILES_FILE="${_so101_root}/scripts/fastdds_profile.xml"
+export FASTRTPS_DEFAULT_PROFILES_FILE="${_so101_root}/python/fastdds_profile.xml"
 unset _so101_here _so101_root

@@ -7,9 +7,9 @@
 set -euo pipefail
 
 . "$(dirname "${BASH_SOURCE[0]}")/common.sh"
+help_if_asked "${BASH_SOURCE[0]}" "$@"
 REPO_ROOT="${SO101_ROOT}"
 
 "${REPO_ROOT}/scripts/setup.sh"
-exec "${REPO_ROOT}/scripts/isolated" bash -c '
-    "$0/.venv/bin/python" "$0/scripts/watch_sim.py" "$@"
-' "${REPO_ROOT}" --node "${CARGO_TARGET_DIR}/release/so101_sim_node" "$@"
+exec "${REPO_ROOT}/scripts/isolated" "${REPO_ROOT}/.venv/bin/python" -m so101.tools.watch_sim \
+    --node "${CARGO_TARGET_DIR}/release/so101_sim_node" "$@"

@@ -5,16 +5,17 @@
 #      network namespaces the tests and nodes run in, libudev (gamepads), Mesa's EGL and OSMesa
 #      (headless rendering of the cameras), FFmpeg's libraries (LeRobot decodes videos with them).
 #   2. The Python venv .venv (CPython 3.12: Jazzy rclpy wheels, Fast DDS, LeRobot, pytest, the
-#      project's so101_lerobot package): scripts/setup_python.sh.
+#      project's `so101` package in python/): scripts/setup_python.sh.
 #   3. The third-party SO-101 meshes (pinned + checksum): scripts/fetch_assets.sh.
 #   4. A release build of the Rust workspace into $CARGO_TARGET_DIR.
 # Each step skips what is already in place, so a second run takes seconds.
 set -euo pipefail
 
 . "$(dirname "${BASH_SOURCE[0]}")/common.sh"
+help_if_asked "${BASH_SOURCE[0]}" "$@"
 REPO_ROOT="${SO101_ROOT}"
 APT_PACKAGES=(libmujoco-dev libmujoco-samples libclang-dev gcc libc6-dev iproute2 util-linux python3-venv
-              libudev-dev pkg-config
+              libudev-dev pkg-config shellcheck
               libegl1 libegl-mesa0 libgl1-mesa-dri libosmesa6
               libavutil57 libavcodec59 libavformat59 libavdevice59 libavfilter8 libswscale6 libswresample4)
 MIN_RUST=1.95.0

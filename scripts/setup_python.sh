@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # Create (or update) the project's Python environment .venv in the repository root:
 # rclpy (ROS 2 Jazzy PyPI wheels), the standard message packages, Fast DDS, LeRobot and the test tools,
-# all pinned in scripts/requirements-ros.txt.
+# all pinned in python/requirements.txt.
 #
 # Idempotent: a stamp in .venv holds the hash of the requirements file and the interpreter version,
 # so a second run with unchanged requirements returns at once. A venv made by another Python
@@ -18,7 +18,8 @@ set -euo pipefail
 
 REPO_ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 . "${REPO_ROOT}/scripts/common.sh"
-REQUIREMENTS="${REPO_ROOT}/scripts/requirements-ros.txt"
+help_if_asked "${BASH_SOURCE[0]}" "$@"
+REQUIREMENTS="${REPO_ROOT}/python/requirements.txt"
 VENV="${VENV:-${REPO_ROOT}/.venv}"
 STAMP="${VENV}/.so101-requirements.stamp"
 
@@ -49,8 +50,8 @@ else
 fi
 
 # The .pth hook written below is part of what a venv must have: bump its version when it changes.
-PTH_VERSION=1
-PACKAGE="${REPO_ROOT}/scripts/pyproject.toml"
+PTH_VERSION=2
+PACKAGE="${REPO_ROOT}/python/pyproject.toml"
 WANT="requirements=$(sha256_of "${REQUIREMENTS}") package=$(sha256_of "${PACKAGE}") python=${PY_VERSION} pth=${PTH_VERSION}"
 
 # Fast path: nothing changed since the last successful run.
@@ -89,17 +90,22 @@ rm -f "${STAMP}"
 log "installing ${REQUIREMENTS#"${REPO_ROOT}"/}"
 "${VENV}/bin/python" -m pip install --quiet --disable-pip-version-check -r "${REQUIREMENTS}"
 
-# The project's own Python package (scripts/so101_lerobot: the bag -> LeRobot converter), editable
-# so the scripts in the checkout are what runs; its dependencies are pinned above.
+# The project's own Python package `so101` (python/: converter, policy runner, Gymnasium envs,
+# launcher, benchmarks), editable so the checkout is what runs; its dependencies are pinned above.
+# (Its name before the move to python/ was so101-lerobot: a venv made then loses that one first.)
+if "${VENV}/bin/python" -m pip show --quiet so101-lerobot >/dev/null 2>&1; then
+    "${VENV}/bin/python" -m pip uninstall --quiet --yes so101-lerobot
+fi
 "${VENV}/bin/python" -m pip install --quiet --disable-pip-version-check --no-deps --no-build-isolation \
-    --editable "${REPO_ROOT}/scripts"
+    --editable "${REPO_ROOT}/python"
 
 # Every Python process of the venv gets the project's Fast DDS profile (4 MiB socket buffers, so
-# rclpy receives camera images from the Rust nodes) and RMW unless its environment names others:
+# rclpy receives camera images from the Rust nodes), RMW and checkout (SO101_ROOT: where the `so101`
+# package finds scripts/isolated, the assets and the build) unless its environment names others:
 # scripts, tests and one-off `python -c` alike, with no environment to source.
 SITE_PACKAGES="$("${VENV}/bin/python" -c 'import sysconfig; print(sysconfig.get_paths()["purelib"])')"
 cat >"${SITE_PACKAGES}/so101_ros_defaults.pth" <<EOF
-import os; os.environ.setdefault("FASTRTPS_DEFAULT_PROFILES_FILE", "${REPO_ROOT}/scripts/fastdds_profile.xml"); os.environ.setdefault("RMW_IMPLEMENTATION", "rmw_fastrtps_cpp")
+import os; os.environ.setdefault("FASTRTPS_DEFAULT_PROFILES_FILE", "${REPO_ROOT}/python/fastdds_profile.xml"); os.environ.setdefault("RMW_IMPLEMENTATION", "rmw_fastrtps_cpp"); os.environ.setdefault("SO101_ROOT", "${REPO_ROOT}")
 EOF
 
 # Smoke test: the wheels import and the Fast DDS RMW library loads. No DDS participant is opened
@@ -115,11 +121,13 @@ from diagnostic_msgs.msg import DiagnosticArray  # noqa: F401
 from geometry_msgs.msg import PoseStamped  # noqa: F401
 import pytest  # noqa: F401
 from lerobot.datasets.lerobot_dataset import LeRobotDataset  # noqa: F401
-import so101_lerobot.convert  # noqa: F401
+import so101.convert  # noqa: F401
+from so101.paths import repo_root
+assert repo_root().is_dir()
 rmw = get_rmw_implementation_identifier()
 assert rmw == "rmw_fastrtps_cpp", rmw
 import os
-assert os.environ["FASTRTPS_DEFAULT_PROFILES_FILE"].endswith("scripts/fastdds_profile.xml"), os.environ
+assert os.environ["FASTRTPS_DEFAULT_PROFILES_FILE"].endswith("python/fastdds_profile.xml"), os.environ
 EOF
 
 printf '%s\n' "${WANT}" >"${STAMP}"

@@ -37,7 +37,7 @@ from harness import (  # noqa: E402
 # Fast DDS profile (large socket buffers) and RMW for every rclpy participant of the run; set before
 # rclpy creates any context.
 os.environ.setdefault("RMW_IMPLEMENTATION", "rmw_fastrtps_cpp")
-os.environ.setdefault("FASTRTPS_DEFAULT_PROFILES_FILE", str(REPO_ROOT / "scripts" / "fastdds_profile.xml"))
+os.environ.setdefault("FASTRTPS_DEFAULT_PROFILES_FILE", str(REPO_ROOT / "python" / "fastdds_profile.xml"))
 
 
 def pytest_configure(config: pytest.Config) -> None:

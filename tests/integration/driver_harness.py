@@ -11,7 +11,6 @@ import threading
 from pathlib import Path
 
 import pytest
-
 from harness import JOINT_NAMES, REPO_ROOT, node_binary
 
 DRIVER_NAME = "so101_feetech_driver"

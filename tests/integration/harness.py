@@ -14,24 +14,21 @@ import subprocess
 import sys
 import threading
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any
 
 import pytest
 
-REPO_ROOT = Path(__file__).resolve().parents[2]
+from so101 import contract
+from so101.paths import repo_root
+
+REPO_ROOT = repo_root()
 NODE_NAME = "so101_sim_node"
 
-JOINT_NAMES = ["shoulder_pan", "shoulder_lift", "elbow_flex", "wrist_flex", "wrist_roll", "gripper"]
-JOINT_LIMITS = {
-    "shoulder_pan": (-1.9199, 1.9199),
-    "shoulder_lift": (-1.7453, 1.7453),
-    "elbow_flex": (-1.69, 1.69),
-    "wrist_flex": (-1.6581, 1.6581),
-    "wrist_roll": (-2.7438, 2.8412),
-    "gripper": (-0.1745, 1.7453),
-}
+JOINT_NAMES = list(contract.JOINT_NAMES)
+JOINT_LIMITS = dict(zip(contract.JOINT_NAMES, contract.JOINT_LIMITS, strict=True))
 # MuJoCo joint limits are soft constraints: a joint driven onto its limit may sit a hair beyond it.
 LIMIT_TOLERANCE = 0.02  # rad
 
@@ -56,7 +53,7 @@ DIAGNOSTICS_STATUS_NAME = "so101_sim_node"
 
 
 # =========================================================================== namespace guard
-from so101_lerobot.isolation import network_namespace_problem  # noqa: E402,F401 - re-exported for conftest
+from so101.isolation import network_namespace_problem  # noqa: E402,F401 - re-exported for conftest
 
 
 # =========================================================================== the node process
@@ -87,7 +84,9 @@ def node_environment() -> dict[str, str]:
     """
     env = dict(os.environ)
     prefix = os.path.realpath(sys.prefix) + os.sep
-    kept = [p for p in env.get("LD_LIBRARY_PATH", "").split(os.pathsep) if p and not (os.path.realpath(p) + os.sep).startswith(prefix)]
+    kept = [
+        p for p in env.get("LD_LIBRARY_PATH", "").split(os.pathsep) if p and not (os.path.realpath(p) + os.sep).startswith(prefix)
+    ]
     if kept:
         env["LD_LIBRARY_PATH"] = os.pathsep.join(kept)
     else:
@@ -236,7 +235,9 @@ class Inbox:
         with self._cond:
             self._items.clear()
 
-    def wait_for(self, predicate: Callable[[list[Any]], bool], timeout: float, what: str, sim: SimNode | None = None) -> list[Any]:
+    def wait_for(
+        self, predicate: Callable[[list[Any]], bool], timeout: float, what: str, sim: SimNode | None = None
+    ) -> list[Any]:
         """Wait until predicate(messages) holds; fails the test with `what` on timeout (or node death)."""
         deadline = time.monotonic() + timeout
         with self._cond:
@@ -263,7 +264,7 @@ class Inbox:
 
 
 def reliable_qos(depth: int = 10):
-    from rclpy.qos import QoSProfile, ReliabilityPolicy, DurabilityPolicy, HistoryPolicy
+    from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 
     return QoSProfile(
         depth=depth, history=HistoryPolicy.KEEP_LAST, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.VOLATILE
@@ -272,10 +273,13 @@ def reliable_qos(depth: int = 10):
 
 def best_effort_qos(depth: int = 100):
     """Matches a writer of any reliability (used where the contract does not fix the QoS)."""
-    from rclpy.qos import QoSProfile, ReliabilityPolicy, DurabilityPolicy, HistoryPolicy
+    from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 
     return QoSProfile(
-        depth=depth, history=HistoryPolicy.KEEP_LAST, reliability=ReliabilityPolicy.BEST_EFFORT, durability=DurabilityPolicy.VOLATILE
+        depth=depth,
+        history=HistoryPolicy.KEEP_LAST,
+        reliability=ReliabilityPolicy.BEST_EFFORT,
+        durability=DurabilityPolicy.VOLATILE,
     )
 
 
@@ -342,7 +346,9 @@ class Probe:
         return dict(self.node.get_service_names_and_types())
 
 
-def wait_until(predicate: Callable[[], bool], timeout: float, what: str, sim: SimNode | None = None, period: float = 0.02) -> None:
+def wait_until(
+    predicate: Callable[[], bool], timeout: float, what: str, sim: SimNode | None = None, period: float = 0.02
+) -> None:
     """Poll predicate; fail the test naming `what` on timeout, or at once if the node died."""
     deadline = time.monotonic() + timeout
     while True:
@@ -463,11 +469,13 @@ def _quaternion_matrix(w: float, x: float, y: float, z: float):
 
     n = math.sqrt(w * w + x * x + y * y + z * z)
     w, x, y, z = w / n, x / n, y / n, z / n
-    return np.array([
-        [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
-        [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
-        [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)],
-    ])
+    return np.array(
+        [
+            [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
+            [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
+            [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)],
+        ]
+    )
 
 
 def scene_body_poses(joints: dict[str, float]) -> dict[str, tuple]:

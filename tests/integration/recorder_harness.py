@@ -20,7 +20,6 @@ from typing import Any
 
 import pytest
 import yaml
-
 from harness import SimNode, node_binary, node_environment
 
 RECORDER = "recorder_node"
@@ -93,7 +92,10 @@ def _wait(predicate, timeout: float, what: str, recorder: SimNode | None) -> Non
     deadline = time.monotonic() + timeout
     while not predicate():
         if recorder is not None and not recorder.alive():
-            pytest.fail(f"the recorder exited (code {recorder.proc.returncode}) while waiting for {what}:\n{recorder.log_tail()}", pytrace=False)
+            pytest.fail(
+                f"the recorder exited (code {recorder.proc.returncode}) while waiting for {what}:\n{recorder.log_tail()}",
+                pytrace=False,
+            )
         if time.monotonic() > deadline:
             log = f"\nrecorder log:\n{recorder.log_tail()}" if recorder is not None else ""
             pytest.fail(f"timeout after {timeout:.1f} s waiting for {what}{log}", pytrace=False)
@@ -146,7 +148,9 @@ def check_metadata_fields(info: dict, episode: Path) -> None:
     assert isinstance(info["compression_format"], str) and isinstance(info["compression_mode"], str)
     for entry in info["topics_with_message_count"]:
         meta = entry["topic_metadata"]
-        assert set(meta) == {"name", "type", "serialization_format", "offered_qos_profiles", "type_description_hash"}, sorted(meta)
+        assert set(meta) == {"name", "type", "serialization_format", "offered_qos_profiles", "type_description_hash"}, sorted(
+            meta
+        )
         assert meta["name"].startswith("/"), meta["name"]
         assert re.fullmatch(r"[a-z0-9_]+/msg/[A-Za-z0-9]+", meta["type"]), meta["type"]
         assert meta["serialization_format"] == "cdr"
@@ -214,7 +218,10 @@ def read_bag(path: Path) -> Bag:
         header = reader.get_header()
         summary = reader.get_summary()
         assert summary is not None, f"{path} has no summary section (not closed properly)"
-        messages = [Recorded(channel.topic, message, ros) for _, channel, message, ros in reader.iter_decoded_messages(log_time_order=False)]
+        messages = [
+            Recorded(channel.topic, message, ros)
+            for _, channel, message, ros in reader.iter_decoded_messages(log_time_order=False)
+        ]
         metadata = list(reader.iter_metadata())
     return Bag(header, summary, messages, {m.name: dict(m.metadata) for m in metadata}, [m.name for m in metadata])
 
@@ -343,9 +350,7 @@ class RecorderServices:
         self._ros, self._recorder = ros, recorder
         self._types = {name: Trigger for name in self.TRIGGERS}
         self._types["mark_success"] = SetBool
-        self._clients = {
-            name: ros.node.create_client(srv, f"{namespace}/recorder/{name}") for name, srv in self._types.items()
-        }
+        self._clients = {name: ros.node.create_client(srv, f"{namespace}/recorder/{name}") for name, srv in self._types.items()}
         for name, client in self._clients.items():
             _wait(client.service_is_ready, timeout, f"service /recorder/{name}", recorder)
         # The server's reply writer matches this client's reply reader a moment after the request

@@ -119,11 +119,13 @@ def test_flood_of_bad_commands(sim_factory, ros):
 
     # /diagnostics counts them.
     diagnostics.wait_for(
-        lambda msgs: (c := latest_diagnostics_values(msgs)) is not None
-        and c.get("rejected_commands", "").isdigit()
-        and int(c["rejected_commands"]) > 0
-        and c.get("accepted_commands", "").isdigit()
-        and int(c["accepted_commands"]) > 0,
+        lambda msgs: (
+            (c := latest_diagnostics_values(msgs)) is not None
+            and c.get("rejected_commands", "").isdigit()
+            and int(c["rejected_commands"]) > 0
+            and c.get("accepted_commands", "").isdigit()
+            and int(c["accepted_commands"]) > 0
+        ),
         5.0,
         f"status {DIAGNOSTICS_STATUS_NAME!r} with rejected_commands > 0 and accepted_commands > 0",
         sim,

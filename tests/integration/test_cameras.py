@@ -12,7 +12,6 @@ import xml.etree.ElementTree as ElementTree
 
 import numpy as np
 import pytest
-
 from harness import (
     REPO_ROOT,
     best_effort_qos,
@@ -78,7 +77,9 @@ def camera_values(msgs) -> dict[str, str] | None:
     for msg in reversed(msgs):
         for status in msg.status:
             if status.name == CAMERA_STATUS:
-                return {kv.key: kv.value for kv in status.values} | {"_level": int.from_bytes(status.level, "little") if isinstance(status.level, bytes) else int(status.level)}
+                return {kv.key: kv.value for kv in status.values} | {
+                    "_level": int.from_bytes(status.level, "little") if isinstance(status.level, bytes) else int(status.level)
+                }
     return None
 
 
@@ -171,7 +172,9 @@ def test_the_cube_is_red_where_its_projected_pose_says_and_reset_moves_it(sim_fa
 
     # Seed 4 puts the cube of the second episode about 3 cm from the first, both in view of both
     # cameras (the upright arm hides a cube near y = 0 from the top camera).
-    sim = sim_factory("--lockstep", "--renderer", renderer, "--seed", "4", "--cameras", "top:320x240,front:320x240", "--camera-rate", "100")
+    sim = sim_factory(
+        "--lockstep", "--renderer", renderer, "--seed", "4", "--cameras", "top:320x240,front:320x240", "--camera-rate", "100"
+    )
     cameras = {name: subscribe_camera(ros, sim, name) for name in ("top", "front")}
     poses = ros.subscribe(sim.name("cube/pose"), PoseStamped, reliable_qos(100))
     wait_until(lambda: ros.node.count_publishers(sim.name("camera/front/image_raw")) >= 1, 30.0, "the camera publishers", sim)
@@ -193,7 +196,9 @@ def test_the_cube_is_red_where_its_projected_pose_says_and_reset_moves_it(sim_fa
             u, v, count = red_centroid(image)
             expected = project(cube, name, info)
             error = math.dist((u, v), expected)
-            assert error < 2.5, f"{label}, {renderer}, {name}: red centroid ({u:.1f}, {v:.1f}) but the pose projects to ({expected[0]:.1f}, {expected[1]:.1f})"
+            assert error < 2.5, (
+                f"{label}, {renderer}, {name}: red centroid ({u:.1f}, {v:.1f}) but the pose projects to ({expected[0]:.1f}, {expected[1]:.1f})"
+            )
             found[name] = (u, v)
         return found
 
@@ -206,7 +211,18 @@ def test_the_cube_is_red_where_its_projected_pose_says_and_reset_moves_it(sim_fa
     assert response.success, response.message
     # The reset's own frames are out by the time it answers.
     step(ros, sim, 1)
-    wait_until(lambda: poses.count() > 0 and all(stamp_seconds(images.latest().header.stamp) == stamp_seconds(poses.latest().header.stamp) for images, _ in cameras.values()), 10.0, "frames of the new episode", sim)
+    wait_until(
+        lambda: (
+            poses.count() > 0
+            and all(
+                stamp_seconds(images.latest().header.stamp) == stamp_seconds(poses.latest().header.stamp)
+                for images, _ in cameras.values()
+            )
+        ),
+        10.0,
+        "frames of the new episode",
+        sim,
+    )
     second = check_all("after /sim/reset")
     for name in cameras:
         moved = math.dist(first[name], second[name])
@@ -221,7 +237,12 @@ def test_egl_and_osmesa_render_the_same_frame(sim_factory, ros):
         images, _ = subscribe_camera(ros, sim, "front")
         wait_until(lambda: ros.node.count_publishers(sim.name("camera/front/image_raw")) >= 1, 30.0, "the camera publisher", sim)
         step(ros, sim, 2)
-        wait_until(lambda: images.count() >= 1 and stamp_seconds(images.latest().header.stamp) >= 0.02 - 1e-9, 10.0, "the frame of the second step", sim)
+        wait_until(
+            lambda: images.count() >= 1 and stamp_seconds(images.latest().header.stamp) >= 0.02 - 1e-9,
+            10.0,
+            "the frame of the second step",
+            sim,
+        )
         frames[renderer] = image_array(images.latest()).astype(int)
         assert sim.stop() == 0
     difference = np.abs(frames["egl"] - frames["osmesa"]).mean()
@@ -276,7 +297,9 @@ def test_jpeg_frames_decode_to_the_raw_frame(sim_factory, ros):
     sim = sim_factory("--lockstep", "--cameras", "front:160x120", "--jpeg", "--jpeg-quality", "95")
     raw, _ = subscribe_camera(ros, sim, "front")
     compressed = ros.subscribe(sim.name("camera/front/image_raw/compressed"), CompressedImage, reliable_qos(10))
-    wait_until(lambda: ros.node.count_publishers(sim.name("camera/front/image_raw/compressed")) >= 1, 30.0, "the JPEG publisher", sim)
+    wait_until(
+        lambda: ros.node.count_publishers(sim.name("camera/front/image_raw/compressed")) >= 1, 30.0, "the JPEG publisher", sim
+    )
     step(ros, sim, 1)
     wait_until(lambda: raw.count() >= 1 and compressed.count() >= 1, 10.0, "a raw and a JPEG frame", sim)
     jpeg = compressed.latest()
@@ -295,7 +318,9 @@ def test_bad_camera_flags_are_refused_with_a_message():
     from harness import node_binary, node_environment
 
     def run(*args):
-        return subprocess.run([str(node_binary()), "--lite", *args], env=node_environment(), capture_output=True, text=True, timeout=60)
+        return subprocess.run(
+            [str(node_binary()), "--lite", *args], env=node_environment(), capture_output=True, text=True, timeout=60
+        )
 
     for args, words in {
         ("--cameras", "top:0x480"): "frame size",
@@ -320,10 +345,17 @@ def test_every_venv_python_gets_the_fast_dds_profile_for_large_images():
 
     env = {k: v for k, v in os.environ.items() if k not in ("FASTRTPS_DEFAULT_PROFILES_FILE", "RMW_IMPLEMENTATION")}
     done = subprocess.run(
-        [sys.executable, "-c", "import os; print(os.environ['FASTRTPS_DEFAULT_PROFILES_FILE']); print(os.environ['RMW_IMPLEMENTATION'])"],
-        env=env, capture_output=True, text=True, timeout=60,
+        [
+            sys.executable,
+            "-c",
+            "import os; print(os.environ['FASTRTPS_DEFAULT_PROFILES_FILE']); print(os.environ['RMW_IMPLEMENTATION'])",
+        ],
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=60,
     )
     assert done.returncode == 0, done.stderr
     profile, rmw = done.stdout.split()
-    assert profile == str(REPO_ROOT / "scripts" / "fastdds_profile.xml") and rmw == "rmw_fastrtps_cpp", done.stdout
-    assert "listenSocketBufferSize" in (REPO_ROOT / "scripts" / "fastdds_profile.xml").read_text()
+    assert profile == str(REPO_ROOT / "python" / "fastdds_profile.xml") and rmw == "rmw_fastrtps_cpp", done.stdout
+    assert "listenSocketBufferSize" in (REPO_ROOT / "python" / "fastdds_profile.xml").read_text()

@@ -8,7 +8,6 @@ import math
 import time
 
 import pytest
-
 from driver_harness import CALIBRATION, joints_in_order, rad_from_ticks, range_in_rad
 from harness import JOINT_NAMES, diagnostics_values, reliable_qos, wait_until
 
@@ -196,7 +195,10 @@ def test_the_watchdog_holds_position_when_commands_stop(arm_factory, ros):
     diagnostics.wait_for(lambda m: bus_values(m).get("watchdog_holds") == "1", 3.0, "watchdog_holds = 1", node)
     # A fresh command resumes motion.
     deadline = time.monotonic() + 6
-    while time.monotonic() < deadline and abs(dict(zip(inbox.latest().name, inbox.latest().position))["shoulder_pan"] - target) > 0.03:
+    while (
+        time.monotonic() < deadline
+        and abs(dict(zip(inbox.latest().name, inbox.latest().position))["shoulder_pan"] - target) > 0.03
+    ):
         pub.publish(joint_command({"shoulder_pan": target}))
         time.sleep(0.05)
     wait_positions(inbox, {"shoulder_pan": target}, node, tolerance=0.03)
@@ -251,7 +253,9 @@ def test_a_silent_servo_stops_goals_and_states_until_it_answers_again(arm_factor
     emulator.command("silent 3 off")
     inbox.wait_count(20, 5.0, node)
     deadline = time.monotonic() + 6
-    while time.monotonic() < deadline and abs(dict(zip(inbox.latest().name, inbox.latest().position))["shoulder_pan"] - 0.5) > 0.02:
+    while (
+        time.monotonic() < deadline and abs(dict(zip(inbox.latest().name, inbox.latest().position))["shoulder_pan"] - 0.5) > 0.02
+    ):
         pub.publish(joint_command({"shoulder_pan": 0.5}))
         time.sleep(0.05)
     wait_positions(inbox, {"shoulder_pan": 0.5}, node)
@@ -290,7 +294,10 @@ def test_leader_mode_publishes_hand_motion_and_never_drives_the_servos(arm_facto
     assert "/joint_states" not in topics
     # The node's own name reaches the graph through discovery, a little after its topics.
     wait_until(
-        lambda: ("so101_leader_driver", "/") in ros.node.get_node_names_and_namespaces(), 15.0, "the leader node in the graph", node
+        lambda: ("so101_leader_driver", "/") in ros.node.get_node_names_and_namespaces(),
+        15.0,
+        "the leader node in the graph",
+        node,
     )
     subs = dict(ros.node.get_subscriber_names_and_types_by_node("so101_leader_driver", "/"))
     assert "/joint_commands" not in subs
@@ -319,13 +326,19 @@ def test_a_missing_calibration_is_a_clear_error(arm_factory, tmp_path):
     try:
         done = subprocess.run(
             [str(node_binary(DRIVER_NAME)), "--port", str(tmp_path / "bus"), "--calibration", str(tmp_path / "none.json")],
-            env=node_environment(), capture_output=True, text=True, timeout=30,
+            env=node_environment(),
+            capture_output=True,
+            text=True,
+            timeout=30,
         )
         assert done.returncode != 0
         assert "calibrate first" in done.stderr, done.stderr
         done = subprocess.run(
             [str(node_binary(DRIVER_NAME)), "--port", str(tmp_path / "nothing"), "--calibration", str(tmp_path / "none.json")],
-            env=node_environment(), capture_output=True, text=True, timeout=30,
+            env=node_environment(),
+            capture_output=True,
+            text=True,
+            timeout=30,
         )
         assert done.returncode != 0
     finally:
@@ -337,7 +350,7 @@ def test_diagnostics_report_every_servo_at_one_hertz(arm_factory, ros):
     diagnostics = subscribe_diagnostics(ros)
     subscribe_joint_states(ros).wait_count(1, 30.0, node)
     emulator.command("error 6 0x20")
-    msgs = diagnostics.wait_count(3, 5.0, node)
+    diagnostics.wait_count(3, 5.0, node)
     diagnostics.clear()
     time.sleep(3.0)
     assert 2 <= diagnostics.count() <= 4, f"{diagnostics.count()} /diagnostics in 3 s"

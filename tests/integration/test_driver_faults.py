@@ -30,7 +30,11 @@ def bus_status(msgs) -> dict[str, str]:
         values = diagnostics_values(msg, f"{DRIVER}: bus")
         if values is not None:
             status = next(s for s in msg.status if s.name == f"{DRIVER}: bus")
-            return {**values, "_message": status.message, "_level": str(status.level[0] if isinstance(status.level, bytes) else status.level)}
+            return {
+                **values,
+                "_message": status.message,
+                "_level": str(status.level[0] if isinstance(status.level, bytes) else status.level),
+            }
     return {}
 
 
@@ -91,7 +95,9 @@ def test_another_arm_after_a_replug_is_refused_and_the_right_one_taken_back(arm_
     emulator.stop()
     other = ServoEmulator(emulator.link, tmp_path / "other.log")
     try:
-        diag.wait_for(lambda m: "differs" in bus_status(m).get("_message", ""), 10.0, "the other arm refused on /diagnostics", node)
+        diag.wait_for(
+            lambda m: "differs" in bus_status(m).get("_message", ""), 10.0, "the other arm refused on /diagnostics", node
+        )
         status = bus_status(diag.messages())
         assert status["connected"] == "false" and status["_level"] == "2", status
         slots = other.slots()

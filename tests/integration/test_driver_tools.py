@@ -46,7 +46,10 @@ def test_calibrate_in_a_terminal_writes_lerobots_file_and_the_servos(tmp_path):
             else:
                 assert (motor["range_min"], motor["range_max"]) == (2047 - 600 - 10 * (index + 1), 2047 + 700 + 10 * (index + 1))
             assert slots[index]["homing_offset"] == motor["homing_offset"]
-            assert (slots[index]["min_position_limit"], slots[index]["max_position_limit"]) == (motor["range_min"], motor["range_max"])
+            assert (slots[index]["min_position_limit"], slots[index]["max_position_limit"]) == (
+                motor["range_min"],
+                motor["range_max"],
+            )
         assert "Calibration written" in terminal.text()
     finally:
         emulator.stop()
@@ -57,7 +60,10 @@ def test_scan_lists_the_servos_as_json(tmp_path):
     try:
         done = subprocess.run(
             [str(node_binary(DRIVER_NAME)), "scan", "--port", str(tmp_path / "bus"), "--json", "--max-id", "20"],
-            env=node_environment(), capture_output=True, text=True, timeout=60,
+            env=node_environment(),
+            capture_output=True,
+            text=True,
+            timeout=60,
         )
         assert done.returncode == 0, done.stderr
         found = json.loads(done.stdout)

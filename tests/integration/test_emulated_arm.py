@@ -4,7 +4,7 @@ that same file, so the driver finds the servos' EPROM as the file says (nothing 
 joints rest mid-range, and /joint_states flow; LeRobot's calibration place (~/.cache/huggingface)
 is never touched.
 
-Runs the launcher of this checkout (python -m so101_lerobot.launch from scripts/) with the driver
+Runs the launcher of this checkout (python -m so101.launch, the editable package in python/) with the driver
 and emulator binaries of $SO101_BIN_DIR.
 """
 
@@ -43,14 +43,17 @@ def test_emulated_arm_comes_up_from_an_empty_home_with_matching_calibration(ros,
     node_binary("so101_servo_emulator")
     home, logs = tmp_path / "home", tmp_path / "logs"
     home.mkdir()
-    env = {key: value for key, value in os.environ.items()
-           if not key.startswith(("HF_", "XDG_")) and key != "PYTHONPATH"}
+    env = {key: value for key, value in os.environ.items() if not key.startswith(("HF_", "XDG_")) and key != "PYTHONPATH"}
     env.update(HOME=str(home), SO101_BIN_DIR=str(bin_dir), PYTHONPATH=str(REPO_ROOT / "scripts"))
     states = ros.subscribe("/joint_states", JointState, best_effort_qos())
     launcher = subprocess.Popen(
-        [sys.executable, "-m", "so101_lerobot.launch", "--robot", "real", "--emulate", "--control", "none",
-         "--log-dir", str(logs)],
-        cwd=tmp_path, env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+        [sys.executable, "-m", "so101.launch", "--robot", "real", "--emulate", "--control", "none", "--log-dir", str(logs)],
+        cwd=tmp_path,
+        env=env,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.STDOUT,
+        text=True,
+    )
     output = ""
     try:
         output = wait_for_launcher(launcher, 60.0)

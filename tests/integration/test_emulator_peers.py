@@ -21,7 +21,7 @@ from __future__ import annotations
 import time
 
 import pytest
-import scservo_sdk as scs  # feetech-servo-sdk, pinned in scripts/requirements-ros.txt
+import scservo_sdk as scs  # feetech-servo-sdk, pinned in python/requirements.txt
 from driver_harness import ServoEmulator
 from harness import JOINT_NAMES
 
@@ -118,8 +118,10 @@ def test_broadcast_ping_finds_all_six_servos(emulator, sdk, lerobot_bus):
     # One after the other, each after its factory Return_Delay_Time (500 us): the 6-byte request
     # and 6 x (500 us + 6-byte status) at 1 Mbaud take at least 3.42 ms.
     assert last - sent >= 3.4e-3, f"{(last - sent) * 1e3:.2f} ms"
-    print(f"broadcast ping: SDK saw the sixth status {(last - sent) * 1e3:.2f} ms after the request; "
-          f"LeRobot's broadcast_ping took {lerobot_s * 1e3:.0f} ms (it waits its whole timeout)")
+    print(
+        f"broadcast ping: SDK saw the sixth status {(last - sent) * 1e3:.2f} ms after the request; "
+        f"LeRobot's broadcast_ping took {lerobot_s * 1e3:.0f} ms (it waits its whole timeout)"
+    )
 
 
 # =========================================================================== Present_Current

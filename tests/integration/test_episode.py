@@ -8,7 +8,6 @@ import subprocess
 import time
 
 import pytest
-
 from harness import (
     DIAGNOSTICS_STATUS_NAME,
     best_effort_qos,
@@ -76,7 +75,9 @@ def test_reset_places_the_cube_somewhere_new_on_the_table(sim_factory, ros):
         moved = math.dist(before[:2], after[:2])
         assert moved > 0.005, f"cube stayed at {before[:2]} -> {after[:2]} after /sim/reset"
         # Resting on the table again: same height as in the first episode.
-        assert after[2] == pytest.approx(table_z, abs=0.01), f"cube at z={after[2]:.4f} after reset, first episode z={table_z:.4f}"
+        assert after[2] == pytest.approx(table_z, abs=0.01), (
+            f"cube at z={after[2]:.4f} after reset, first episode z={table_z:.4f}"
+        )
     # The joint_states keep coming across resets.
     running.joint_states.next_message(5.0, running.sim)
 
@@ -152,7 +153,12 @@ def test_step_is_refused_without_lockstep(sim_factory, ros):
 
 @pytest.mark.parametrize(
     "task_args",
-    [["--task", "cube_to_bin"], ["--task", "cube_to_bin", "--dense-reward"], ["--task", "touch_cube"], ["--task", "touch_cube_sparse"]],
+    [
+        ["--task", "cube_to_bin"],
+        ["--task", "cube_to_bin", "--dense-reward"],
+        ["--task", "touch_cube"],
+        ["--task", "touch_cube_sparse"],
+    ],
     ids=["cube_to_bin", "cube_to_bin_dense", "touch_cube", "touch_cube_sparse"],
 )
 def test_task_reward_and_success_are_published(sim_factory, ros, task_args):
@@ -192,7 +198,11 @@ def test_diagnostics_report_command_counters(sim_factory, ros):
     pub.publish(JointState(name=["gripper"], position=[current["gripper"]]))
 
     msgs = diagnostics.wait_for(
-        lambda msgs: (c := latest_diagnostics_values(msgs)) is not None and c.get("accepted_commands", "0").isdigit() and int(c["accepted_commands"]) >= 1,
+        lambda msgs: (
+            (c := latest_diagnostics_values(msgs)) is not None
+            and c.get("accepted_commands", "0").isdigit()
+            and int(c["accepted_commands"]) >= 1
+        ),
         5.0,
         f"a status {DIAGNOSTICS_STATUS_NAME!r} with accepted_commands >= 1",
         running.sim,

@@ -5,7 +5,6 @@ from __future__ import annotations
 import time
 
 import pytest
-
 from harness import NODE_NAME, PUBLISHED_TOPICS, SERVICES, SUBSCRIBED_TOPICS, start_and_wait
 
 DISCOVERY_TIMEOUT = 20.0

@@ -10,7 +10,7 @@ def test_the_gymnasium_env_passes_the_checker_and_steps_the_sim():
     import gymnasium as gym
     from gymnasium.utils.env_checker import check_env
 
-    env = gym.make("so101_lerobot.gym_env:so101/CubeToBin-v0")
+    env = gym.make("so101:so101/CubeToBin-v0")
     try:
         check_env(env.unwrapped, skip_render_check=True)
         observation, _ = env.reset(seed=3)
@@ -35,7 +35,7 @@ def test_the_gymnasium_env_passes_the_checker_and_steps_the_sim():
 def test_with_cameras_each_step_brings_the_frames_of_its_state():
     import gymnasium as gym
 
-    env = gym.make("so101_lerobot.gym_env:so101/TouchCube-v0", cameras={"top": (48, 64), "front": (60, 80)})
+    env = gym.make("so101:so101/TouchCube-v0", cameras={"top": (48, 64), "front": (60, 80)})
     try:
         observation, _ = env.reset(seed=2)
         assert env.observation_space.contains(observation)

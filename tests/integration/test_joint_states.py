@@ -6,7 +6,6 @@ import math
 import time
 
 import pytest
-
 from harness import (
     JOINT_NAMES,
     best_effort_qos,

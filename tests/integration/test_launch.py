@@ -14,7 +14,6 @@ import time
 from pathlib import Path
 
 import yaml
-
 from driver_harness import write_calibration
 from harness import best_effort_qos, wait_for_launcher
 
@@ -39,10 +38,31 @@ def gone(pid: int) -> bool:
 
 def test_sim_expert_recording_profile_records_its_episodes_and_ends(tmp_path):
     bags, logs, rrd = tmp_path / "bags", tmp_path / "logs", tmp_path / "run.rrd"
-    done = subprocess.run([str(LAUNCH), "--control", "expert", "--episodes", "2", "--record", "--bags", str(bags),
-                           "--lite", "--sim-args", "--cameras none", "--seed", "4", "--log-dir", str(logs),
-                           "--tf", "--rerun", str(rrd)],
-                          capture_output=True, text=True, timeout=180)
+    done = subprocess.run(
+        [
+            str(LAUNCH),
+            "--control",
+            "expert",
+            "--episodes",
+            "2",
+            "--record",
+            "--bags",
+            str(bags),
+            "--lite",
+            "--sim-args",
+            "--cameras none",
+            "--seed",
+            "4",
+            "--log-dir",
+            str(logs),
+            "--tf",
+            "--rerun",
+            str(rrd),
+        ],
+        capture_output=True,
+        text=True,
+        timeout=180,
+    )
     assert done.returncode == 0, done.stdout + done.stderr
     pids = started_pids(done.stdout)
     assert list(pids) == ["so101_sim_node", "so101_state_publisher", "so101_rerun", "recorder_node", "teleop_node"], done.stdout
@@ -69,9 +89,26 @@ def test_real_profile_on_the_emulator_stops_cleanly_on_sigterm(ros, tmp_path):
     bags, logs = tmp_path / "bags", tmp_path / "logs"
     states = ros.subscribe("/joint_states", JointState, best_effort_qos())
     launcher = subprocess.Popen(
-        [str(LAUNCH), "--robot", "real", "--emulate", "--calibration", str(calibration), "--control", "none",
-         "--record", "--bags", str(bags), "--recorder-args=--start", "--log-dir", str(logs)],
-        stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+        [
+            str(LAUNCH),
+            "--robot",
+            "real",
+            "--emulate",
+            "--calibration",
+            str(calibration),
+            "--control",
+            "none",
+            "--record",
+            "--bags",
+            str(bags),
+            "--recorder-args=--start",
+            "--log-dir",
+            str(logs),
+        ],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.STDOUT,
+        text=True,
+    )
     output = ""
     try:
         output = wait_for_launcher(launcher, 60.0)

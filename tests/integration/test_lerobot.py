@@ -11,7 +11,6 @@ import sys
 from pathlib import Path
 
 import numpy as np
-
 from harness import best_effort_qos, wait_until
 
 JOINTS = ["shoulder_pan", "shoulder_lift", "elbow_flex", "wrist_flex", "wrist_roll", "gripper"]
@@ -39,14 +38,18 @@ def lerobot_units(radians: list[float]) -> np.ndarray:
     return values
 
 
-def test_expert_bags_become_a_lerobot_dataset_that_lerobot_loads_and_replays(sim_factory, recorder_factory, teleop_factory, ros, tmp_path):
+def test_expert_bags_become_a_lerobot_dataset_that_lerobot_loads_and_replays(
+    sim_factory, recorder_factory, teleop_factory, ros, tmp_path
+):
     sim = sim_factory("--speed", "2", "--seed", "3", "--cameras", "top:64x48,wrist:64x48", "--camera-rate", "30")
     recorder = recorder_factory()
     wait_until(lambda: ros.node.count_subscribers("/episode/events") >= 1, 20.0, "the recorder", sim)
     teleop = teleop_factory("--source", "expert", "--sim-time", "--episodes", "2", "--seed", "2")
     wait_until(lambda: not teleop.alive(), 120.0, "the expert's 2 episodes", sim)
     bags = recorder.output
-    wait_until(lambda: len([d for d in bags.glob("episode_*") if (d / "metadata.yaml").is_file()]) == 2, 20.0, "2 closed episodes", sim)
+    wait_until(
+        lambda: len([d for d in bags.glob("episode_*") if (d / "metadata.yaml").is_file()]) == 2, 20.0, "2 closed episodes", sim
+    )
 
     # A third episode directory cut short (no metadata.yaml, as after a kill -9).
     broken = bags / "episode_000002"
@@ -54,8 +57,12 @@ def test_expert_bags_become_a_lerobot_dataset_that_lerobot_loads_and_replays(sim
     (broken / "metadata.yaml").unlink()
 
     output = tmp_path / "dataset"
-    done = subprocess.run([str(CONVERTER), str(bags), "--output", str(output), "--repo-id", "local/so101_test", "--quiet"],
-                          capture_output=True, text=True, timeout=300)
+    done = subprocess.run(
+        [str(CONVERTER), str(bags), "--output", str(output), "--repo-id", "local/so101_test", "--quiet"],
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
     assert done.returncode == 0, done.stdout + done.stderr
     assert "2 episode(s)" in done.stdout and "1 skipped" in done.stdout and "episode_000002" in done.stdout, done.stdout
 
@@ -72,7 +79,10 @@ def test_expert_bags_become_a_lerobot_dataset_that_lerobot_loads_and_replays(sim
     for episode_index, directory in enumerate(sorted(bags.glob("episode_00000[01]"))):
         states = bag_messages(directory, "/joint_states")
         frames = bag_messages(directory, "/camera/top/image_raw")
-        start, stop = dataset.meta.episodes["dataset_from_index"][episode_index], dataset.meta.episodes["dataset_to_index"][episode_index]
+        start, stop = (
+            dataset.meta.episodes["dataset_from_index"][episode_index],
+            dataset.meta.episodes["dataset_to_index"][episode_index],
+        )
         count = stop - start
         span = min(states[-1][0], frames[-1][0]) - max(states[0][0], frames[0][0])
         assert abs(count - span * 30) <= 2, f"episode {episode_index}: {count} frames for {span:.2f} s at 30 fps"
@@ -110,7 +120,23 @@ def test_expert_bags_become_a_lerobot_dataset_that_lerobot_loads_and_replays(sim
 
     sim_factory("--seed", "3", "--cameras", "none", "--namespace", "replay")
     success = ros.subscribe("/replay/task/success", Bool, best_effort_qos())
-    done = subprocess.run([str(REPLAY), str(output), "--repo-id", "local/so101_test", "--episode", "0", "--reset",
-                           "--namespace", "replay", "--ramp", "1"], capture_output=True, text=True, timeout=120)
+    done = subprocess.run(
+        [
+            str(REPLAY),
+            str(output),
+            "--repo-id",
+            "local/so101_test",
+            "--episode",
+            "0",
+            "--reset",
+            "--namespace",
+            "replay",
+            "--ramp",
+            "1",
+        ],
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
     assert done.returncode == 0 and "replayed" in done.stdout, done.stdout + done.stderr
     wait_until(lambda: success.count() > 0 and success.latest().data, 5.0, "/task/success after the replay")

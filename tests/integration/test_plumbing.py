@@ -7,7 +7,6 @@ import subprocess
 import time
 
 import pytest
-
 from harness import best_effort_qos, node_binary, node_environment, reliable_qos, start_and_wait
 
 
@@ -110,6 +109,17 @@ def test_bad_flags_are_refused_with_a_message():
 def test_help_lists_every_flag():
     done = subprocess.run([str(node_binary()), "--help"], capture_output=True, text=True, timeout=30)
     assert done.returncode == 0
-    for flag in ("--scene", "--lite", "--task", "--dense-reward", "--seed", "--rate", "--speed", "--lockstep",
-                 "--demo", "--duration", "--namespace"):
+    for flag in (
+        "--scene",
+        "--lite",
+        "--task",
+        "--dense-reward",
+        "--seed",
+        "--rate",
+        "--speed",
+        "--lockstep",
+        "--demo",
+        "--duration",
+        "--namespace",
+    ):
         assert flag in done.stdout, flag

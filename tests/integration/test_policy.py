@@ -15,7 +15,6 @@ import sys
 from pathlib import Path
 
 import numpy as np
-
 from harness import best_effort_qos, reliable_qos, wait_until
 
 JOINTS = ["shoulder_pan", "shoulder_lift", "elbow_flex", "wrist_flex", "wrist_roll", "gripper"]
@@ -32,21 +31,42 @@ def run(argv: list[str], timeout: float, **kwargs) -> subprocess.CompletedProces
 def train_tiny_act(dataset: Path, output: Path) -> Path:
     """lerobot-train, as a user runs it: ACT shrunk to a few thousand transformer weights, no
     pretrained backbone (nothing downloaded), 3 steps on the CPU."""
-    done = run([VENV_BIN / "lerobot-train", "--dataset.repo_id=local/so101_policy_test", f"--dataset.root={dataset}",
-                "--policy.type=act", "--policy.device=cpu", "--policy.push_to_hub=false",
-                "--policy.pretrained_backbone_weights=null", "--policy.dim_model=32", "--policy.n_heads=2",
-                "--policy.dim_feedforward=64", "--policy.n_encoder_layers=1", "--policy.n_decoder_layers=1",
-                "--policy.n_vae_encoder_layers=1", "--policy.chunk_size=10", "--policy.n_action_steps=10",
-                "--steps=3", "--batch_size=4", "--num_workers=0", "--save_freq=3", "--log_freq=1",
-                "--wandb.enable=false", f"--output_dir={output}"], timeout=300)
+    done = run(
+        [
+            VENV_BIN / "lerobot-train",
+            "--dataset.repo_id=local/so101_policy_test",
+            f"--dataset.root={dataset}",
+            "--policy.type=act",
+            "--policy.device=cpu",
+            "--policy.push_to_hub=false",
+            "--policy.pretrained_backbone_weights=null",
+            "--policy.dim_model=32",
+            "--policy.n_heads=2",
+            "--policy.dim_feedforward=64",
+            "--policy.n_encoder_layers=1",
+            "--policy.n_decoder_layers=1",
+            "--policy.n_vae_encoder_layers=1",
+            "--policy.chunk_size=10",
+            "--policy.n_action_steps=10",
+            "--steps=3",
+            "--batch_size=4",
+            "--num_workers=0",
+            "--save_freq=3",
+            "--log_freq=1",
+            "--wandb.enable=false",
+            f"--output_dir={output}",
+        ],
+        timeout=300,
+    )
     assert done.returncode == 0, done.stdout[-3000:] + done.stderr[-3000:]
     checkpoint = output / "checkpoints" / "last" / "pretrained_model"
     assert (checkpoint / "model.safetensors").is_file() and (checkpoint / "policy_preprocessor.json").is_file()
     return checkpoint
 
 
-def test_a_tiny_act_trained_on_a_converted_dataset_runs_through_the_runner(sim_factory, recorder_factory, teleop_factory, arm_factory,
-                                                                           ros, tmp_path):
+def test_a_tiny_act_trained_on_a_converted_dataset_runs_through_the_runner(
+    sim_factory, recorder_factory, teleop_factory, arm_factory, ros, tmp_path
+):
     # Demonstrations: one expert episode, recorded and converted.
     sim = sim_factory("--speed", "2", "--seed", "5", "--cameras", CAMERAS)
     recorder = recorder_factory()
@@ -55,16 +75,41 @@ def test_a_tiny_act_trained_on_a_converted_dataset_runs_through_the_runner(sim_f
     wait_until(lambda: not teleop.alive(), 90.0, "the expert's episode", sim)
     wait_until(lambda: (recorder.output / "episode_000000" / "metadata.yaml").is_file(), 20.0, "the closed episode", sim)
     dataset = tmp_path / "dataset"
-    done = run([VENV_BIN / "so101-bag-to-lerobot", recorder.output, "--output", dataset,
-                "--repo-id", "local/so101_policy_test", "--quiet"], timeout=300)
+    done = run(
+        [
+            VENV_BIN / "so101-bag-to-lerobot",
+            recorder.output,
+            "--output",
+            dataset,
+            "--repo-id",
+            "local/so101_policy_test",
+            "--quiet",
+        ],
+        timeout=300,
+    )
     assert done.returncode == 0 and "1 episode(s) (1 successful)" in done.stdout, done.stdout + done.stderr
 
     checkpoint = train_tiny_act(dataset, tmp_path / "train")
 
     # Evaluation: one seeded episode of 2 s on the runner's own sim in lockstep.
     evaluation = tmp_path / "eval"
-    done = run([VENV_BIN / "so101-run-policy", checkpoint, "--eval", "1", "--seed", "7", "--episode-time", "2",
-                "--lite", "--output", evaluation, "--quiet"], timeout=300)
+    done = run(
+        [
+            VENV_BIN / "so101-run-policy",
+            checkpoint,
+            "--eval",
+            "1",
+            "--seed",
+            "7",
+            "--episode-time",
+            "2",
+            "--lite",
+            "--output",
+            evaluation,
+            "--quiet",
+        ],
+        timeout=300,
+    )
     assert done.returncode == 0, done.stdout[-3000:] + done.stderr[-3000:]
     info = json.loads((evaluation / "eval_info.json").read_text())
     assert info["aggregated"]["episodes"] == 1 and info["aggregated"]["pc_success"] in (0.0, 100.0)
@@ -108,8 +153,19 @@ def test_a_tiny_act_trained_on_a_converted_dataset_runs_through_the_runner(sim_f
     states = ros.subscribe("/joint_states", JointState, best_effort_qos())
     first = states.next_message(20.0, arm)
     before = np.array([dict(zip(first.name, first.position))[j] for j in JOINTS])
-    done = run([VENV_BIN / "so101-run-policy", checkpoint, "--duration", "3",
-                "--camera", "top=/live/camera/top/image_raw", "--camera", "wrist=/live/camera/wrist/image_raw"], timeout=120)
+    done = run(
+        [
+            VENV_BIN / "so101-run-policy",
+            checkpoint,
+            "--duration",
+            "3",
+            "--camera",
+            "top=/live/camera/top/image_raw",
+            "--camera",
+            "wrist=/live/camera/wrist/image_raw",
+        ],
+        timeout=120,
+    )
     assert done.returncode == 0, done.stdout[-3000:] + done.stderr[-3000:]
     arm.assert_alive()
     after = np.array([dict(zip(states.latest().name, states.latest().position))[j] for j in JOINTS])
@@ -117,8 +173,10 @@ def test_a_tiny_act_trained_on_a_converted_dataset_runs_through_the_runner(sim_f
 
     # A missing camera: the runner says which and exits; the sim is unharmed.
     partial = sim_factory("--cameras", "top:64x48", "--namespace", "partial")
-    done = run([VENV_BIN / "so101-run-policy", checkpoint, "--namespace", "partial", "--duration", "1",
-                "--startup-timeout", "3"], timeout=60)
+    done = run(
+        [VENV_BIN / "so101-run-policy", checkpoint, "--namespace", "partial", "--duration", "1", "--startup-timeout", "3"],
+        timeout=60,
+    )
     assert done.returncode != 0 and "camera wrist" in done.stderr, done.stdout + done.stderr
     partial.assert_alive()
 

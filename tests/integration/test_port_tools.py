@@ -66,8 +66,9 @@ def test_find_port_fails_with_advice_when_nothing_or_several_disappeared(tmp_pat
         assert "The port of this adapter" not in terminal.text()
 
         # Both unplugged.
-        terminal = Terminal(driver("find-port", "--dev-glob", f"{ports}/bus_a", "--dev-glob", f"{ports}/bus_b"),
-                            env=node_environment())
+        terminal = Terminal(
+            driver("find-port", "--dev-glob", f"{ports}/bus_a", "--dev-glob", f"{ports}/bus_b"), env=node_environment()
+        )
         terminal.expect("Remove the USB cable")
         first.command("hangup 4")
         second.command("hangup 4")
@@ -79,8 +80,15 @@ def test_find_port_fails_with_advice_when_nothing_or_several_disappeared(tmp_pat
         wait_for_path(ports / "bus_b")
 
         # No port at all where it looks: it says so before asking anything.
-        done = subprocess.run(check=False, args=driver("find-port", "--dev-glob", f"{tmp_path}/nothing*"), env=node_environment(),
-                              stdin=subprocess.DEVNULL, capture_output=True, text=True, timeout=30)
+        done = subprocess.run(
+            check=False,
+            args=driver("find-port", "--dev-glob", f"{tmp_path}/nothing*"),
+            env=node_environment(),
+            stdin=subprocess.DEVNULL,
+            capture_output=True,
+            text=True,
+            timeout=30,
+        )
         assert done.returncode != 0 and "no serial port found" in done.stderr + done.stdout
     finally:
         first.stop()
@@ -91,14 +99,20 @@ def parse_rule(line: str) -> dict[str, tuple[str, str]]:
     fields = {}
     for part in line.split(", "):
         match = RULE_FIELD.match(part)
-        assert match, f"not a udev KEY==\"VALUE\" field: {part!r} in {line!r}"
+        assert match, f'not a udev KEY=="VALUE" field: {part!r} in {line!r}'
         fields[match["key"]] = (match["op"], match["value"])
     return fields
 
 
 def test_install_udev_prints_rules_that_parse(tmp_path):
-    done = subprocess.run(check=False, args=driver("install-udev", "--follower-serial", "5A46082351", "--leader-serial", "58FA083324", "--print"),
-                          env=node_environment(), capture_output=True, text=True, timeout=30)
+    done = subprocess.run(
+        check=False,
+        args=driver("install-udev", "--follower-serial", "5A46082351", "--leader-serial", "58FA083324", "--print"),
+        env=node_environment(),
+        capture_output=True,
+        text=True,
+        timeout=30,
+    )
     assert done.returncode == 0, done.stderr
     rules = [parse_rule(line) for line in done.stdout.splitlines() if line.strip() and not line.startswith("#")]
     naming = [rule for rule in rules if "SYMLINK" in rule]
@@ -112,14 +126,26 @@ def test_install_udev_prints_rules_that_parse(tmp_path):
     assert all(rule["DRIVER"] == ("==", "ftdi_sio") and rule["SUBSYSTEM"] == ("==", "usb-serial") for rule in latency)
     assert len(rules) == 4
     # The default is printing, too.
-    default = subprocess.run(check=False, args=driver("install-udev", "--follower-serial", "5A46082351", "--leader-serial", "58FA083324"),
-                             env=node_environment(), capture_output=True, text=True, timeout=30)
+    default = subprocess.run(
+        check=False,
+        args=driver("install-udev", "--follower-serial", "5A46082351", "--leader-serial", "58FA083324"),
+        env=node_environment(),
+        capture_output=True,
+        text=True,
+        timeout=30,
+    )
     assert default.returncode == 0 and default.stdout == done.stdout
 
 
 def test_install_udev_writes_the_rules_file_and_refuses_bad_serials(tmp_path):
-    done = subprocess.run(check=False, args=driver("install-udev", "--follower-serial", "A1B2", "--install", "--rules-dir", str(tmp_path)),
-                          env=node_environment(), capture_output=True, text=True, timeout=30)
+    done = subprocess.run(
+        check=False,
+        args=driver("install-udev", "--follower-serial", "A1B2", "--install", "--rules-dir", str(tmp_path)),
+        env=node_environment(),
+        capture_output=True,
+        text=True,
+        timeout=30,
+    )
     assert done.returncode == 0, done.stderr
     path = tmp_path / "99-so101.rules"
     text = path.read_text()
@@ -129,15 +155,31 @@ def test_install_udev_writes_the_rules_file_and_refuses_bad_serials(tmp_path):
     assert "sudo udevadm control --reload-rules && sudo udevadm trigger" in done.stdout
     assert "sudo usermod -aG dialout $USER" in done.stdout
 
-    for bad in (["--follower-serial", 'x" MODE="0666'], ["--follower-serial", "A*"], ["--follower-serial", ""],
-                ["--follower-serial", "S1", "--leader-serial", "S1"]):
-        refused = subprocess.run(check=False, args=driver("install-udev", *bad, "--install", "--rules-dir", str(tmp_path / "other")),
-                                 env=node_environment(), capture_output=True, text=True, timeout=30)
+    for bad in (
+        ["--follower-serial", 'x" MODE="0666'],
+        ["--follower-serial", "A*"],
+        ["--follower-serial", ""],
+        ["--follower-serial", "S1", "--leader-serial", "S1"],
+    ):
+        refused = subprocess.run(
+            check=False,
+            args=driver("install-udev", *bad, "--install", "--rules-dir", str(tmp_path / "other")),
+            env=node_environment(),
+            capture_output=True,
+            text=True,
+            timeout=30,
+        )
         assert refused.returncode != 0, bad
         assert "serial number" in refused.stderr, refused.stderr
     assert not (tmp_path / "other").exists()
     # --rules-dir only with --install; --print and --install exclude each other.
     for conflicting in (["--rules-dir", str(tmp_path)], ["--print", "--install"]):
-        refused = subprocess.run(check=False, args=driver("install-udev", "--follower-serial", "A1", *conflicting),
-                                 env=node_environment(), capture_output=True, text=True, timeout=30)
+        refused = subprocess.run(
+            check=False,
+            args=driver("install-udev", "--follower-serial", "A1", *conflicting),
+            env=node_environment(),
+            capture_output=True,
+            text=True,
+            timeout=30,
+        )
         assert refused.returncode == 2, conflicting

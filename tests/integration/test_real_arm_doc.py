@@ -93,14 +93,16 @@ class Desk:
         (self.cwd / ".venv").symlink_to(Path(sys.prefix))
         self.bin_dir = node_binary("so101_feetech_driver").parent
         env = {k: v for k, v in node_environment().items() if not k.startswith("HF_")}
-        env.update(HOME=str(self.home), CARGO_TARGET_DIR=str(self.bin_dir.parent), SO101_BIN_DIR=str(self.bin_dir),
-                   B=str(self.bin_dir))
+        env.update(
+            HOME=str(self.home), CARGO_TARGET_DIR=str(self.bin_dir.parent), SO101_BIN_DIR=str(self.bin_dir), B=str(self.bin_dir)
+        )
         self.env = env
         for port in PORTS:
             link = self.dev / Path(port).name
             # Factory servos, all id 1: the user connects one at a time for setup-motors.
-            self.emulators[port] = ServoEmulator(link, self.tmp / f"{link.name}.log", "--ids", "1,1,1,1,1,1",
-                                                 "--plugged", "0", "--timing", "instant")
+            self.emulators[port] = ServoEmulator(
+                link, self.tmp / f"{link.name}.log", "--ids", "1,1,1,1,1,1", "--plugged", "0", "--timing", "instant"
+            )
             self.links[port] = link
 
     def close(self):
@@ -155,8 +157,15 @@ class Desk:
 # =========================================================================== one driver per kind
 def setup_line(desk: Desk, command: str, match: re.Match) -> None:
     env = {k: v for k, v in desk.env.items() if k != "B"}
-    done = subprocess.run(check=False, args=["bash", "-c", command + '; printf %s "$B"'], env=env, cwd=desk.cwd, capture_output=True,
-                          text=True, timeout=30)
+    done = subprocess.run(
+        check=False,
+        args=["bash", "-c", command + '; printf %s "$B"'],
+        env=env,
+        cwd=desk.cwd,
+        capture_output=True,
+        text=True,
+        timeout=30,
+    )
     assert done.returncode == 0, done.stderr
     assert Path(done.stdout) == desk.bin_dir, f"B is {done.stdout!r}, not the binaries' directory {desk.bin_dir}"
 
@@ -182,8 +191,9 @@ def udev_print(desk: Desk, command: str, match: re.Match) -> None:
     rules = [line for line in out.splitlines() if line and not line.startswith("#")]
     serials = re.findall(r"--(follower|leader)-serial (\S+)", command)
     for role, serial in serials:
-        assert any(f'ATTRS{{serial}}=="{serial}", SYMLINK+="so101_{role}", GROUP="dialout", MODE="0660"' in rule
-                   for rule in rules), out
+        assert any(
+            f'ATTRS{{serial}}=="{serial}", SYMLINK+="so101_{role}", GROUP="dialout", MODE="0660"' in rule for rule in rules
+        ), out
 
 
 def udev_install(desk: Desk, command: str, match: re.Match) -> None:
@@ -261,8 +271,11 @@ def move_leader_and_see_the_follower_follow(desk: Desk, terminal: Terminal, delt
     follower, leader = (desk.emulators[port] for port in PORTS)
     start = desk.slots_by_id(PORTS[0])[1]["present_position"]
     leader.command(f"move 1 {CENTRE[1] + delta}")  # shoulder_pan of the leader, by hand
-    desk.wait_for(lambda: abs(desk.slots_by_id(PORTS[0])[1]["present_position"] - (2047 + delta)) < 20,
-                  f"the follower's shoulder_pan to follow the leader from {start} to {2047 + delta}", terminal)
+    desk.wait_for(
+        lambda: abs(desk.slots_by_id(PORTS[0])[1]["present_position"] - (2047 + delta)) < 20,
+        f"the follower's shoulder_pan to follow the leader from {start} to {2047 + delta}",
+        terminal,
+    )
     assert all(slot["torque_enable"] == 1 for slot in follower.slots())
 
 
@@ -293,7 +306,9 @@ def viewer(desk: Desk, command: str, match: re.Match) -> None:
     rrd = desk.cwd / match["file"]
     rerun = Path(sys.prefix) / "bin" / "rerun"
     for check in (["rrd", "verify"], ["rrd", "print"]):
-        done = subprocess.run(check=False, args=[str(rerun), *check, str(rrd)], env=desk.env, capture_output=True, text=True, timeout=120)
+        done = subprocess.run(
+            check=False, args=[str(rerun), *check, str(rrd)], env=desk.env, capture_output=True, text=True, timeout=120
+        )
         assert done.returncode == 0, f"rerun {' '.join(check)} {rrd}: {done.stderr}"
     assert "shoulder_pan" in done.stdout + done.stderr, done.stdout[-3000:]
 
@@ -312,8 +327,16 @@ PORT = r"(?P<port>/dev/so101_(?:follower|leader))"
 DRIVERS = [
     ("setup", r"\. scripts/common\.sh; B=\$CARGO_TARGET_DIR/release", setup_line),
     ("find-port", r"\$B/so101_feetech_driver find-port", find_port),
-    ("install-udev --print", r"\$B/so101_feetech_driver install-udev --follower-serial \w+ --leader-serial \w+ --print", udev_print),
-    ("install-udev --install", r"sudo \$B/so101_feetech_driver install-udev --follower-serial \w+ --leader-serial \w+ --install", udev_install),
+    (
+        "install-udev --print",
+        r"\$B/so101_feetech_driver install-udev --follower-serial \w+ --leader-serial \w+ --print",
+        udev_print,
+    ),
+    (
+        "install-udev --install",
+        r"sudo \$B/so101_feetech_driver install-udev --follower-serial \w+ --leader-serial \w+ --install",
+        udev_install,
+    ),
     ("setup-motors", rf"\$B/so101_feetech_driver setup-motors --port {PORT}", setup_motors),
     ("calibrate", rf"\$B/so101_feetech_driver calibrate --port {PORT} --robot-id (?P<id>\w+)(?P<leader> --leader)?", calibrate),
     ("driver", rf"scripts/isolated \$B/so101_feetech_driver --port {PORT} --robot-id \w+(?P<leader> --leader)?", driver),
@@ -347,7 +370,9 @@ def test_every_command_of_the_real_arm_page_runs_against_the_emulator(tmp_path, 
 
 
 def test_a_command_the_test_does_not_know_is_refused():
-    for command in ("$B/so101_feetech_driver calibrate --port /dev/ttyACM0 --robot-id x",
-                    "$B/so101_feetech_driver reboot --port /dev/so101_follower",
-                    "scripts/isolated $B/teleop_node --source leader"):
+    for command in (
+        "$B/so101_feetech_driver calibrate --port /dev/ttyACM0 --robot-id x",
+        "$B/so101_feetech_driver reboot --port /dev/so101_follower",
+        "scripts/isolated $B/teleop_node --source leader",
+    ):
         assert not any(re.fullmatch(pattern, command) for _, pattern, _ in DRIVERS), command

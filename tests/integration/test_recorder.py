@@ -19,7 +19,6 @@ from pathlib import Path
 
 import pytest
 import yaml
-
 from harness import JOINT_NAMES, node_binary, node_environment, reliable_qos, wait_until
 from recorder_harness import (
     LOAD_PUBLISHER,
@@ -30,8 +29,8 @@ from recorder_harness import (
     all_finite,
     check_metadata_fields,
     check_qos_profiles,
-    episode_dirs,
     ends_with_magic,
+    episode_dirs,
     load_metadata,
     mcap_files,
     read_bag,
@@ -89,7 +88,9 @@ def check_times(messages, start_ns: int, stop_ns: int) -> None:
         assert log >= last.get(m.topic, 0), f"{m.topic}: log_time goes backwards ({last[m.topic]} -> {log})"
         last[m.topic] = log
         earlier += pub < log
-    assert earlier >= 0.9 * len(messages), f"publish_time < log_time for only {earlier} of {len(messages)} messages: not the source timestamp?"
+    assert earlier >= 0.9 * len(messages), (
+        f"publish_time < log_time for only {earlier} of {len(messages)} messages: not the source timestamp?"
+    )
 
 
 # =========================================================================== 1. the sim, by default
@@ -127,7 +128,11 @@ def test_default_recording_of_the_sim_reads_back_as_a_rosbag2_bag(sim_factory, r
     bag = read_bag(episode / "episode_000000_0.mcap")
     assert bag.header.profile == "ros2", bag.header.profile
     stats = bag.summary.statistics
-    assert stats.message_count == info["message_count"] == len(bag.messages), (stats.message_count, info["message_count"], len(bag.messages))
+    assert stats.message_count == info["message_count"] == len(bag.messages), (
+        stats.message_count,
+        info["message_count"],
+        len(bag.messages),
+    )
     assert bag.channel_counts() == counts, (bag.channel_counts(), counts)
     decoded = {}
     for m in bag.messages:
@@ -155,7 +160,9 @@ def test_default_recording_of_the_sim_reads_back_as_a_rosbag2_bag(sim_factory, r
         "geometry_msgs/msg/PoseStamped": ["MSG: geometry_msgs/Pose", "MSG: geometry_msgs/Point", "MSG: geometry_msgs/Quaternion"],
         "diagnostic_msgs/msg/DiagnosticArray": ["MSG: diagnostic_msgs/DiagnosticStatus", "MSG: diagnostic_msgs/KeyValue"],
     }
-    qos_by_topic = {t["topic_metadata"]["name"]: t["topic_metadata"]["offered_qos_profiles"] for t in info["topics_with_message_count"]}
+    qos_by_topic = {
+        t["topic_metadata"]["name"]: t["topic_metadata"]["offered_qos_profiles"] for t in info["topics_with_message_count"]
+    }
     assert len(bag.summary.channels) == len(counts), [c.topic for c in bag.summary.channels.values()]
     for channel in bag.summary.channels.values():
         schema = bag.summary.schemas[channel.schema_id]
@@ -211,7 +218,9 @@ def test_nothing_is_lost_at_the_stacks_load_and_every_byte_survives(recorder_fac
     assert topic_counts(info) == published, f"recorded {topic_counts(info)}, published {published}"
     assert info["custom_data"]["dropped_messages"] == "0", info["custom_data"]
     types = topic_types(info)
-    assert types["/joint_states"] == "sensor_msgs/msg/JointState" and all(types[c] == "sensor_msgs/msg/Image" for c in cameras), types
+    assert types["/joint_states"] == "sensor_msgs/msg/JointState" and all(types[c] == "sensor_msgs/msg/Image" for c in cameras), (
+        types
+    )
 
     paths = mcap_files(episode)
     assert len(paths) == 1
@@ -234,7 +243,9 @@ def test_nothing_is_lost_at_the_stacks_load_and_every_byte_survives(recorder_fac
             assert stamp > previous_stamp, f"{topic} #{k}: header stamps not increasing"
             previous_stamp = stamp
             # The source timestamp is taken just after the header's wall-clock stamp.
-            assert -5_000_000 <= m.record.publish_time - stamp <= 200_000_000, f"{topic} #{k}: publish_time - stamp = {m.record.publish_time - stamp} ns"
+            assert -5_000_000 <= m.record.publish_time - stamp <= 200_000_000, (
+                f"{topic} #{k}: publish_time - stamp = {m.record.publish_time - stamp} ns"
+            )
     joints = bag.on("/joint_states")
     assert len(joints) == published["/joint_states"]
     for k, m in enumerate(joints):
@@ -339,11 +350,15 @@ def test_episodes_follow_the_events_topic(recorder_factory, ros):
 
     check_metadata_fields(first_info, first)
     custom = first_info["custom_data"]
-    assert (custom["episode_index"], custom["task"], custom["seed"], custom["success"]) == ("0", "pick the cube", "7", "true"), custom
+    assert (custom["episode_index"], custom["task"], custom["seed"], custom["success"]) == ("0", "pick the cube", "7", "true"), (
+        custom
+    )
     bag = read_bag(mcap_files(first)[0])
     assert bag.records["episode"] == custom
     recorded = bag.on("/joint_commands")
-    assert [m.ros.header.frame_id for m in recorded] == [f"command {k}" for k in range(20)], "joint_commands lost, added or reordered"
+    assert [m.ros.header.frame_id for m in recorded] == [f"command {k}" for k in range(20)], (
+        "joint_commands lost, added or reordered"
+    )
     for m, msg in zip(recorded, sent):
         assert list(m.ros.name) == JOINT_NAMES and list(m.ros.position) == list(msg.position)
         # The CDR bytes as received: rclpy's own decoder gives the sent message back (no byte
@@ -359,7 +374,9 @@ def test_episodes_follow_the_events_topic(recorder_factory, ros):
 
     check_metadata_fields(second_info, second)
     custom = second_info["custom_data"]
-    assert (custom["episode_index"], custom["task"], custom["seed"], custom["success"]) == ("1", "default task", "", "false"), custom
+    assert (custom["episode_index"], custom["task"], custom["seed"], custom["success"]) == ("1", "default task", "", "false"), (
+        custom
+    )
     bag = read_bag(mcap_files(second)[0])
     assert not bag.on("/joint_commands"), "joint_commands of episode 0 leaked into episode 1"
     texts = [m.ros.data for m in bag.on("/episode/events")]
@@ -432,7 +449,9 @@ def test_after_kill_9_every_closed_chunk_is_readable(sim_factory, recorder_facto
     assert len(joints) >= (3.0 - 0.8) * 100, f"only {len(joints)} /joint_states recovered (reader stopped by {got.error!r})"
     check_sim_joint_states(joints, minimum=1)
     last_log = max(m.record.log_time for m in got.messages)
-    assert killed_ns - last_log <= 800_000_000, f"the newest recovered message is {(killed_ns - last_log) / 1e9:.2f} s older than the kill (--max-chunk-age 0.3)"
+    assert killed_ns - last_log <= 800_000_000, (
+        f"the newest recovered message is {(killed_ns - last_log) / 1e9:.2f} s older than the kill (--max-chunk-age 0.3)"
+    )
     for topic in ("/task/reward", "/task/success", "/cube/pose"):
         assert got.on(topic), f"nothing of {topic} recovered"
 
@@ -469,13 +488,17 @@ def test_zstd_chunks_and_split_by_duration(sim_factory, recorder_factory, ros):
             f"but its first written one ({bag.messages[0].topic} @ {logs[0]})"
         )
         assert entry["duration"]["nanoseconds"] == max(logs) - min(logs), f"{path.name}: duration"
-        assert max(logs) - min(logs) <= 1_200_000_000, f"{path.name} spans {(max(logs) - min(logs)) / 1e9:.2f} s with --split-duration 1"
+        assert max(logs) - min(logs) <= 1_200_000_000, (
+            f"{path.name} spans {(max(logs) - min(logs)) / 1e9:.2f} s with --split-duration 1"
+        )
         for topic, count in bag.channel_counts().items():
             totals[topic] = totals.get(topic, 0) + count
     assert sum(f["message_count"] for f in info["files"]) == info["message_count"]
     assert totals == topic_counts(info), (totals, topic_counts(info))
     # The last file's rosbag2 record is the final metadata.yaml.
-    assert yaml.safe_load(bag.records["rosbag2"]["serialized_metadata"]) == yaml.safe_load((episode / "metadata.yaml").read_text())
+    assert yaml.safe_load(bag.records["rosbag2"]["serialized_metadata"]) == yaml.safe_load(
+        (episode / "metadata.yaml").read_text()
+    )
 
 
 # =========================================================================== 7. a full disk
@@ -510,7 +533,10 @@ def test_a_full_disk_is_reported_and_what_was_written_stays_readable(tmp_path, r
 
     probe = subprocess.run(["unshare", "--mount", "--propagation", "private", "true"], capture_output=True, text=True)
     if probe.returncode != 0:
-        pytest.fail(f"cannot create a mount namespace for the small tmpfs (unshare --mount refused): {probe.stderr.strip()}", pytrace=False)
+        pytest.fail(
+            f"cannot create a mount namespace for the small tmpfs (unshare --mount refused): {probe.stderr.strip()}",
+            pytrace=False,
+        )
     disk = tmp_path / "disk"
     disk.mkdir()
     script = FULL_DISK_SCRIPT.format(
@@ -630,7 +656,9 @@ def test_bad_options_are_refused_with_a_clear_message(tmp_path):
     output = done.stdout + done.stderr
     assert done.returncode != 0, f"--regex '(' accepted:\n{output}"
     assert "panicked" not in output, output
-    line = next((line for line in output.splitlines() if "(" in line and ("pattern" in line.lower() or "regex" in line.lower())), None)
+    line = next(
+        (line for line in output.splitlines() if "(" in line and ("pattern" in line.lower() or "regex" in line.lower())), None
+    )
     assert line is not None and "error" in output.lower(), f"the message does not name the bad pattern:\n{output}"
 
     not_a_dir = tmp_path / "a_file"

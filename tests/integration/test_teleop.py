@@ -16,7 +16,6 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-
 from harness import (
     JOINT_LIMITS,
     JOINT_NAMES,
@@ -31,6 +30,7 @@ from harness import (
     start_and_wait,
     wait_until,
 )
+
 
 def write_script(path: Path, lines: list[dict]) -> Path:
     path.write_text("".join(json.dumps(line) + "\n" for line in lines))
@@ -63,11 +63,14 @@ def settle(running, timeout: float = 10.0, tolerance: float = 0.003):
 def test_scripted_joint_jog_moves_the_sim_arm_at_the_set_speed_and_rate(sim_factory, teleop_factory, ros, tmp_path):
     running = start_and_wait(sim_factory, ros)
     commands = commands_inbox(ros)
-    script = write_script(tmp_path / "jog.jsonl", [
-        {"at": 0.0, "jog": [0, 0, 0, 0, 0, 0]},
-        {"at": 1.0, "jog": [1, 0, 0, 0, 0, 1]},
-        {"at": 2.0, "jog": [0, 0, 0, 0, 0, 0]},
-    ])
+    script = write_script(
+        tmp_path / "jog.jsonl",
+        [
+            {"at": 0.0, "jog": [0, 0, 0, 0, 0, 0]},
+            {"at": 1.0, "jog": [1, 0, 0, 0, 0, 1]},
+            {"at": 2.0, "jog": [0, 0, 0, 0, 0, 0]},
+        ],
+    )
     teleop_factory("--source", "scripted", "--script", script, "--joint-speed", "0.5", "--gripper-speed", "0.2")
     commands.wait_count(10, 20.0, running.sim)
     start = positions_by_name(commands.messages()[0])
@@ -91,14 +94,17 @@ def test_cartesian_jog_moves_the_grasp_point_along_each_axis(sim_factory, teleop
     reach = [0.1, -0.3, 0.3, 1.0, 0.2, 0.5]  # grasp point 11 cm above the table
     # Absolute to a reaching pose first (Cartesian mode ignores the mode for targets), then 1 s of
     # +x, then 1 s of -z and 1 s of +y, at 4 cm/s.
-    script = write_script(tmp_path / "cartesian.jsonl", [
-        {"at": 0.0, "targets": reach},
-        {"at": 3.0, "jog": [0, 0, 0, 0, 0, 0]},
-        {"at": 4.0, "jog": [1, 0, 0, 0, 0, 0]},
-        {"at": 5.0, "jog": [0, 0, -1, 0, 0, 0]},
-        {"at": 6.0, "jog": [0, 1, 0, 0, 0, 0]},
-        {"at": 7.0, "jog": [0, 0, 0, 0, 0, 0]},
-    ])
+    script = write_script(
+        tmp_path / "cartesian.jsonl",
+        [
+            {"at": 0.0, "targets": reach},
+            {"at": 3.0, "jog": [0, 0, 0, 0, 0, 0]},
+            {"at": 4.0, "jog": [1, 0, 0, 0, 0, 0]},
+            {"at": 5.0, "jog": [0, 0, -1, 0, 0, 0]},
+            {"at": 6.0, "jog": [0, 1, 0, 0, 0, 0]},
+            {"at": 7.0, "jog": [0, 0, 0, 0, 0, 0]},
+        ],
+    )
     teleop_factory("--source", "scripted", "--script", script, "--mode", "cartesian", "--linear-speed", "0.04")
     commands.wait_count(5, 20.0, running.sim)
     t0 = commands.items()[0][0]
@@ -121,14 +127,19 @@ def test_cartesian_jog_moves_the_grasp_point_along_each_axis(sim_factory, teleop
 def test_no_command_leaves_the_joint_limits_in_either_mode(sim_factory, teleop_factory, ros, tmp_path):
     running = start_and_wait(sim_factory, ros)
     commands = commands_inbox(ros)
-    script = write_script(tmp_path / "push.jsonl", [
-        {"at": 0.0, "jog": [1, -1, 1, -1, 1, 1]},
-        {"at": 2.0, "control": "toggle_mode"},
-        {"at": 2.0, "jog": [1, 1, 1, 1, 1, -1]},
-        {"at": 4.0, "jog": [0, 0, -1, -1, -1, 0]},
-        {"at": 6.0, "control": "quit"},
-    ])
-    teleop = teleop_factory("--source", "scripted", "--script", script, "--joint-speed", "3", "--linear-speed", "0.5", "--angular-speed", "3")
+    script = write_script(
+        tmp_path / "push.jsonl",
+        [
+            {"at": 0.0, "jog": [1, -1, 1, -1, 1, 1]},
+            {"at": 2.0, "control": "toggle_mode"},
+            {"at": 2.0, "jog": [1, 1, 1, 1, 1, -1]},
+            {"at": 4.0, "jog": [0, 0, -1, -1, -1, 0]},
+            {"at": 6.0, "control": "quit"},
+        ],
+    )
+    teleop = teleop_factory(
+        "--source", "scripted", "--script", script, "--joint-speed", "3", "--linear-speed", "0.5", "--angular-speed", "3"
+    )
     wait_until(lambda: not teleop.alive(), 30.0, "the script's quit", running.sim)
     assert teleop.proc.returncode == 0, teleop.log_tail()
     values = [positions_by_name(m) for m in commands.messages()]
@@ -203,8 +214,14 @@ def test_the_keyboard_drives_the_arm_through_a_real_terminal(sim_factory, ros, t
     events = ros.subscribe("/episode/events", String, reliable_qos(100))
     controller, terminal = pty.openpty()
     log = open(tmp_path / "teleop_keyboard.log", "wb")
-    teleop = subprocess.Popen([str(node_binary("teleop_node")), "--source", "keyboard", "--joint-speed", "0.5"],
-                              stdin=terminal, stdout=terminal, stderr=log, env=node_environment(), cwd=REPO_ROOT)
+    teleop = subprocess.Popen(
+        [str(node_binary("teleop_node")), "--source", "keyboard", "--joint-speed", "0.5"],
+        stdin=terminal,
+        stdout=terminal,
+        stderr=log,
+        env=node_environment(),
+        cwd=REPO_ROOT,
+    )
     os.close(terminal)
     screen = b""
     try:
@@ -239,7 +256,6 @@ def test_the_keyboard_drives_the_arm_through_a_real_terminal(sim_factory, ros, t
 
 # =========================================================================== episode controls
 def test_episode_controls_reach_the_recorder_topic_and_reset_the_sim(sim_factory, teleop_factory, ros, tmp_path):
-    from diagnostic_msgs.msg import DiagnosticArray
     from geometry_msgs.msg import PoseStamped
     from std_msgs.msg import String
 
@@ -248,41 +264,61 @@ def test_episode_controls_reach_the_recorder_topic_and_reset_the_sim(sim_factory
     poses = ros.subscribe("/cube/pose", PoseStamped, best_effort_qos())
     poses.wait_count(1, 10.0, running.sim)
     first_cube = poses.latest().pose.position
-    script = write_script(tmp_path / "controls.jsonl", [
-        {"at": 1.0, "control": "toggle_recording"},
-        {"at": 1.2, "control": "success"},
-        {"at": 1.4, "control": "toggle_recording"},
-        {"at": 1.6, "control": "start"},
-        {"at": 1.8, "control": "failure"},
-        {"at": 2.0, "control": "rerecord"},
-        {"at": 2.2, "control": "stop"},
-        {"at": 2.4, "control": "reset"},
-    ])
+    script = write_script(
+        tmp_path / "controls.jsonl",
+        [
+            {"at": 1.0, "control": "toggle_recording"},
+            {"at": 1.2, "control": "success"},
+            {"at": 1.4, "control": "toggle_recording"},
+            {"at": 1.6, "control": "start"},
+            {"at": 1.8, "control": "failure"},
+            {"at": 2.0, "control": "rerecord"},
+            {"at": 2.2, "control": "stop"},
+            {"at": 2.4, "control": "reset"},
+        ],
+    )
     teleop_factory("--source", "scripted", "--script", script)
     expected = ["start", "success", "stop", "start", "failure", "rerecord", "stop"]
     events.wait_for(lambda msgs: len(msgs) >= len(expected), 15.0, "the episode events", running.sim)
     assert [m.data for m in events.messages()] == expected
     # /sim/reset moved the cube (seeded placement) and started episode 1.
-    wait_until(lambda: math.dist((poses.latest().pose.position.x, poses.latest().pose.position.y), (first_cube.x, first_cube.y)) > 0.005,
-               10.0, "the cube to move after the reset", running.sim)
+    wait_until(
+        lambda: math.dist((poses.latest().pose.position.x, poses.latest().pose.position.y), (first_cube.x, first_cube.y)) > 0.005,
+        10.0,
+        "the cube to move after the reset",
+        running.sim,
+    )
     wait_until(lambda: "new episode" in running.sim.log(), 5.0, "the sim's new episode", running.sim)
 
 
 # =========================================================================== the expert
 def test_the_expert_puts_the_cube_in_the_bin_in_seeded_episodes_and_the_recorder_keeps_them(
-        sim_factory, teleop_factory, recorder_factory, ros, tmp_path):
-    from std_msgs.msg import String
-
+    sim_factory, teleop_factory, recorder_factory, ros, tmp_path
+):
     from recorder_harness import episode_dirs, load_metadata, mcap_files, read_bag
+    from std_msgs.msg import String
 
     sim = sim_factory("--speed", "3", "--seed", "11")
     recorder = recorder_factory()
     events = ros.subscribe("/episode/events", String, reliable_qos(1000))
-    wait_until(lambda: ros.node.count_subscribers("/episode/events") >= 2, 20.0, "the recorder's /episode/events subscription", sim)
+    wait_until(
+        lambda: ros.node.count_subscribers("/episode/events") >= 2, 20.0, "the recorder's /episode/events subscription", sim
+    )
     report = tmp_path / "expert.json"
     episodes = 4
-    teleop = teleop_factory("--source", "expert", "--sim-time", "--episodes", str(episodes), "--seed", "5",
-                            "--waypoint-noise", "0.003", "--report", report)
+    teleop = teleop_factory(
+        "--source",
+        "expert",
+        "--sim-time",
+        "--episodes",
+        str(episodes),
+        "--seed",
+        "5",
+        "--waypoint-noise",
+        "0.003",
+        "--report",
+        report,
+    )
     wait_until(lambda: not teleop.alive(), 150.0, f"the expert's {episodes} episodes", sim)
     assert teleop.proc.returncode == 0, teleop.log_tail()
     result = json.loads(report.read_text())
@@ -297,8 +333,15 @@ def test_the_expert_puts_the_cube_in_the_bin_in_seeded_episodes_and_the_recorder
     cubes = [tuple(r["cube"][:2]) for r in result["results"]]
     assert len({(round(x, 3), round(y, 3)) for x, y in cubes}) == episodes, cubes
     # One bag per episode, with the expert's verdict, task and seed, and its motion in it.
-    wait_until(lambda: len(episode_dirs(recorder.output)) == episodes
-               and all((d / "metadata.yaml").is_file() for d in episode_dirs(recorder.output)), 15.0, "the episode bags", sim)
+    wait_until(
+        lambda: (
+            len(episode_dirs(recorder.output)) == episodes
+            and all((d / "metadata.yaml").is_file() for d in episode_dirs(recorder.output))
+        ),
+        15.0,
+        "the episode bags",
+        sim,
+    )
     for directory, outcome, start in zip(episode_dirs(recorder.output), result["results"], starts):
         custom = load_metadata(directory)["custom_data"]
         announced = json.loads(start[6:])
@@ -314,7 +357,14 @@ def test_the_expert_puts_the_cube_in_the_bin_in_seeded_episodes_and_the_recorder
 # =========================================================================== bad input
 def test_bad_flags_and_scripts_are_refused_with_a_message(tmp_path):
     def run(*args):
-        return subprocess.run([str(node_binary("teleop_node")), *args], env=node_environment(), capture_output=True, text=True, timeout=60, stdin=subprocess.DEVNULL)
+        return subprocess.run(
+            [str(node_binary("teleop_node")), *args],
+            env=node_environment(),
+            capture_output=True,
+            text=True,
+            timeout=60,
+            stdin=subprocess.DEVNULL,
+        )
 
     for args, words in {
         ("--source", "telepathy"): "--source",

@@ -10,14 +10,12 @@ import time
 import xml.etree.ElementTree as ElementTree
 
 import numpy as np
-
 from harness import (
     JOINT_LIMITS,
     JOINT_NAMES,
     SimNode,
     node_binary,
     node_environment,
-    reliable_qos,
     scene_body_poses,
     start_and_wait,
     wait_until,
@@ -30,22 +28,29 @@ PARENTS = ["base", "shoulder", "upper_arm", "lower_arm", "wrist", "gripper"]
 def latched_qos():
     from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 
-    return QoSProfile(depth=1, history=HistoryPolicy.KEEP_LAST, reliability=ReliabilityPolicy.RELIABLE,
-                      durability=DurabilityPolicy.TRANSIENT_LOCAL)
+    return QoSProfile(
+        depth=1,
+        history=HistoryPolicy.KEEP_LAST,
+        reliability=ReliabilityPolicy.RELIABLE,
+        durability=DurabilityPolicy.TRANSIENT_LOCAL,
+    )
 
 
 def quaternion_matrix(q) -> np.ndarray:
     w, x, y, z = q.w, q.x, q.y, q.z
-    return np.array([
-        [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
-        [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
-        [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)],
-    ])
+    return np.array(
+        [
+            [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
+            [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
+            [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)],
+        ]
+    )
 
 
 def run_node(name: str, *args: str, timeout: float = 120.0) -> subprocess.CompletedProcess:
-    return subprocess.run([str(node_binary(name)), *[str(a) for a in args]], capture_output=True, text=True,
-                          timeout=timeout, env=node_environment())
+    return subprocess.run(
+        [str(node_binary(name)), *[str(a) for a in args]], capture_output=True, text=True, timeout=timeout, env=node_environment()
+    )
 
 
 def rrd_entities(path) -> dict[str, int]:
@@ -76,9 +81,9 @@ def scalar_series(path, entity: str) -> np.ndarray:
 def test_robot_description_and_tf_match_the_scene(sim_factory, recorder_factory, ros, tmp_path):
     """/tf is read back from a bag of it (recorder_node, then rosbags with its own Jazzy types):
     the rclpy wheels have no tf2_msgs."""
+    from rclpy.qos import DurabilityPolicy
     from rosbags.rosbag2 import Reader
     from rosbags.typesys import Stores, get_typestore
-    from rclpy.qos import DurabilityPolicy
     from sensor_msgs.msg import JointState
     from std_msgs.msg import String
 
@@ -108,7 +113,14 @@ def test_robot_description_and_tf_match_the_scene(sim_factory, recorder_factory,
         assert static_info.qos_profile.durability == DurabilityPolicy.TRANSIENT_LOCAL
 
         # Move the arm, with the recorder keeping /tf and /joint_states.
-        target = {"shoulder_pan": 0.5, "shoulder_lift": -0.4, "elbow_flex": 0.6, "wrist_flex": 0.7, "wrist_roll": -1.0, "gripper": 0.8}
+        target = {
+            "shoulder_pan": 0.5,
+            "shoulder_lift": -0.4,
+            "elbow_flex": 0.6,
+            "wrist_flex": 0.7,
+            "wrist_roll": -1.0,
+            "gripper": 0.8,
+        }
         commands = ros.publisher("/joint_commands", JointState, sim=running.sim)
         deadline = time.monotonic() + 3
         while time.monotonic() < deadline:
@@ -142,8 +154,10 @@ def test_robot_description_and_tf_match_the_scene(sim_factory, recorder_factory,
             t = transforms[link]
             parent_rotation, parent_position = poses[t.header.frame_id]
             offset = t.transform.translation
-            poses[link] = (parent_rotation @ quaternion_matrix(t.transform.rotation),
-                           parent_position + parent_rotation @ np.array([offset.x, offset.y, offset.z]))
+            poses[link] = (
+                parent_rotation @ quaternion_matrix(t.transform.rotation),
+                parent_position + parent_rotation @ np.array([offset.x, offset.y, offset.z]),
+            )
             rotation, position = poses[link]
             want_rotation, want_position = expected[link]
             assert np.linalg.norm(position - want_position) < 1e-5, f"{link} at {stamp}: {position} vs {want_position}"
@@ -155,9 +169,13 @@ def test_a_live_run_saved_to_rrd_reads_back_with_the_expected_entities(sim_facto
 
     running = start_and_wait(sim_factory, ros, "--cameras", "top:64x48,wrist:64x48", "--task", "cube_to_bin", "--dense-reward")
     output = tmp_path / "live.rrd"
-    bridge = subprocess.Popen([str(node_binary("so101_rerun")), "live", "--save", str(output),
-                               "--cameras", "top,wrist", "--image-rate", "0"],
-                              stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, env=node_environment())
+    bridge = subprocess.Popen(
+        [str(node_binary("so101_rerun")), "live", "--save", str(output), "--cameras", "top,wrist", "--image-rate", "0"],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.STDOUT,
+        text=True,
+        env=node_environment(),
+    )
     # The arm moves once the bridge listens (its camera subscriptions show it on the graph).
     wait_until(lambda: ros.node.count_subscribers("/camera/wrist/image_raw") >= 1, 20.0, "the bridge", running.sim)
     time.sleep(0.5)
@@ -173,10 +191,19 @@ def test_a_live_run_saved_to_rrd_reads_back_with_the_expected_entities(sim_facto
 
     rows = rrd_entities(output)
     expected = {
-        "/world", "/world/table/shape", "/world/bin/shape", "/world/cube", "/world/cube/shape",
-        "/world/base/shoulder", "/world/base/shoulder/upper_arm/lower_arm/wrist/gripper/moving_jaw",
-        "/cameras/top", "/cameras/wrist", "/task/reward", "/task/success",
-        *(f"/joints/{name}/position" for name in JOINT_NAMES), "/joints/shoulder_pan/command",
+        "/world",
+        "/world/table/shape",
+        "/world/bin/shape",
+        "/world/cube",
+        "/world/cube/shape",
+        "/world/base/shoulder",
+        "/world/base/shoulder/upper_arm/lower_arm/wrist/gripper/moving_jaw",
+        "/cameras/top",
+        "/cameras/wrist",
+        "/task/reward",
+        "/task/success",
+        *(f"/joints/{name}/position" for name in JOINT_NAMES),
+        "/joints/shoulder_pan/command",
     }
     missing = expected - set(rows)
     assert not missing, f"missing entities {missing}; have {sorted(rows)}"
@@ -215,7 +242,10 @@ def test_an_episode_bag_becomes_an_rrd_with_every_joint_state(sim_factory, recor
         for _schema, channel, _message in make_reader(f).iter_messages():
             counts[channel.topic] = counts.get(channel.topic, 0) + 1
     rows = rrd_entities(output / f"{episode.name}.rrd")
-    assert rows["/joints/gripper/position"] == counts["/joint_states"], (rows.get("/joints/gripper/position"), counts["/joint_states"])
+    assert rows["/joints/gripper/position"] == counts["/joint_states"], (
+        rows.get("/joints/gripper/position"),
+        counts["/joint_states"],
+    )
     assert rows["/cameras/top"] == counts["/camera/top/image_raw"]
     assert rows["/world/cube"] == counts["/cube/pose"]
     # The truncated copy keeps what could be read.

@@ -1,6 +1,7 @@
 //! The recorder node: raw subscriptions on one receive thread (woken by DDS, never blocked by the
 //! disk), episode control from events and services, and the writer thread that owns the bag.
 
+use so101_core::contract::{services, topics};
 use std::{
     collections::HashSet,
     sync::{
@@ -472,12 +473,12 @@ struct PendingCall {
 impl Control {
     fn serve(node: &mut RosNode) -> Result<Self> {
         Ok(Self {
-            events: node.subscription("episode/events", qos::command_subscription())?,
-            task_success: node.subscription("task/success", qos::command_subscription())?,
-            start: node.server::<Trigger>("recorder/start")?,
-            stop: node.server::<Trigger>("recorder/stop")?,
-            discard: node.server::<Trigger>("recorder/discard")?,
-            mark_success: node.server::<SetBool>("recorder/mark_success")?,
+            events: node.subscription(topics::EPISODE_EVENTS, qos::command_subscription())?,
+            task_success: node.subscription(topics::TASK_SUCCESS, qos::command_subscription())?,
+            start: node.server::<Trigger>(services::RECORDER_START)?,
+            stop: node.server::<Trigger>(services::RECORDER_STOP)?,
+            discard: node.server::<Trigger>(services::RECORDER_DISCARD)?,
+            mark_success: node.server::<SetBool>(services::RECORDER_MARK_SUCCESS)?,
             last_task_success: None,
             pending: Vec::new(),
             warnings: RateLimiter::new(Duration::from_secs(1)),

@@ -3,6 +3,7 @@
 //! recorder can write (the standard types of `so101_msgs`). Pure logic.
 
 use regex::Regex;
+use so101_core::contract::topics;
 use so101_msgs::{
     builtin_interfaces, diagnostic_msgs, geometry_msgs, rosgraph_msgs, sensor_msgs, std_msgs,
     tf2_msgs, RosMessage, TypeInfo,
@@ -68,18 +69,18 @@ pub fn ros_topic_name(dds_name: &str) -> Option<String> {
 /// discovery has seen a publisher (the first messages of an episode that starts with the
 /// recorder are not lost to discovery).
 pub const DEFAULT_FIXED: &[(&str, &str)] = &[
-    ("joint_states", "sensor_msgs/msg/JointState"),
-    ("joint_commands", "sensor_msgs/msg/JointState"),
+    (topics::JOINT_STATES, "sensor_msgs/msg/JointState"),
+    (topics::JOINT_COMMANDS, "sensor_msgs/msg/JointState"),
     (
-        "forward_position_controller/commands",
+        topics::FORWARD_POSITION_COMMANDS,
         "std_msgs/msg/Float64MultiArray",
     ),
-    ("leader/joint_states", "sensor_msgs/msg/JointState"),
-    ("task/reward", "std_msgs/msg/Float64"),
-    ("task/success", "std_msgs/msg/Bool"),
-    ("cube/pose", "geometry_msgs/msg/PoseStamped"),
-    ("episode/events", "std_msgs/msg/String"),
-    ("diagnostics", "diagnostic_msgs/msg/DiagnosticArray"),
+    (topics::LEADER_JOINT_STATES, "sensor_msgs/msg/JointState"),
+    (topics::TASK_REWARD, "std_msgs/msg/Float64"),
+    (topics::TASK_SUCCESS, "std_msgs/msg/Bool"),
+    (topics::CUBE_POSE, "geometry_msgs/msg/PoseStamped"),
+    (topics::EPISODE_EVENTS, "std_msgs/msg/String"),
+    (topics::DIAGNOSTICS, "diagnostic_msgs/msg/DiagnosticArray"),
 ];
 
 /// ROS type name of a DDS type (`sensor_msgs::msg::dds_::JointState_` -> `sensor_msgs/msg/JointState`).

@@ -4,6 +4,7 @@
 
 pub mod cli_values;
 pub mod command;
+pub mod contract;
 pub mod kinematics;
 pub mod robot;
 pub mod ros;

@@ -1,6 +1,7 @@
 //! The node's side of the topic contract: the publishers (on their own thread, so publishing never
 //! slows the physics) and the two services. Commands come in through so101_core's CommandInbox.
 
+use so101_core::contract::{services, topics};
 use std::{
     sync::mpsc::{sync_channel, Receiver, SyncSender},
     thread::JoinHandle,
@@ -84,12 +85,12 @@ impl FramePublisher {
     pub fn start(node: &mut RosNode) -> Result<Self, NodeError> {
         let topic = qos::default_topic();
         let publishers = Publishers {
-            joint_states: node.publisher("joint_states", topic.clone())?,
-            clock: node.publisher("clock", topic.clone())?,
-            reward: node.publisher("task/reward", topic.clone())?,
-            success: node.publisher("task/success", topic.clone())?,
-            cube_pose: node.publisher("cube/pose", topic.clone())?,
-            diagnostics: node.publisher("diagnostics", topic)?,
+            joint_states: node.publisher(topics::JOINT_STATES, topic.clone())?,
+            clock: node.publisher(topics::CLOCK, topic.clone())?,
+            reward: node.publisher(topics::TASK_REWARD, topic.clone())?,
+            success: node.publisher(topics::TASK_SUCCESS, topic.clone())?,
+            cube_pose: node.publisher(topics::CUBE_POSE, topic.clone())?,
+            diagnostics: node.publisher(topics::DIAGNOSTICS, topic)?,
         };
         let (sender, receiver) = sync_channel(BATCH_QUEUE);
         let thread = spawn_publisher_thread(move || publish_frames(&publishers, &receiver))?;
@@ -290,8 +291,8 @@ pub struct PendingCall(ros2_client::RmwRequestId);
 impl SimServices {
     pub fn serve(node: &mut RosNode) -> Result<Self, NodeError> {
         Ok(Self {
-            reset: node.server::<Trigger>("sim/reset")?,
-            step: node.server::<Trigger>("sim/step")?,
+            reset: node.server::<Trigger>(services::SIM_RESET)?,
+            step: node.server::<Trigger>(services::SIM_STEP)?,
         })
     }
 

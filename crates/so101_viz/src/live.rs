@@ -1,5 +1,6 @@
 //! The live bridge: the stack's topics -> [`Bridge`], until a signal or --duration.
 
+use so101_core::contract::topics;
 use std::time::{Duration, Instant};
 
 use anyhow::Result;
@@ -31,11 +32,11 @@ pub fn run(
 ) -> Result<()> {
     let mut node = RosNode::start("so101_rerun_bridge", node_args)?;
     let topics = Topics {
-        joint_states: node.subscription("joint_states", qos::reliable(100))?,
-        commands: node.subscription("joint_commands", qos::reliable(100))?,
-        cube: node.subscription("cube/pose", qos::reliable(100))?,
-        reward: node.subscription("task/reward", qos::reliable(100))?,
-        success: node.subscription("task/success", qos::reliable(100))?,
+        joint_states: node.subscription(topics::JOINT_STATES, qos::reliable(100))?,
+        commands: node.subscription(topics::JOINT_COMMANDS, qos::reliable(100))?,
+        cube: node.subscription(topics::CUBE_POSE, qos::reliable(100))?,
+        reward: node.subscription(topics::TASK_REWARD, qos::reliable(100))?,
+        success: node.subscription(topics::TASK_SUCCESS, qos::reliable(100))?,
         cameras: cameras
             .iter()
             .map(|name| {

@@ -1,6 +1,7 @@
 //! so101_state_publisher: /robot_description (latched) and /tf_static once, then /tf for every
 //! joint state, stamped with the joint state's stamp (sim time with the sim).
 
+use so101_core::contract::topics;
 use std::path::PathBuf;
 use std::time::{Duration, Instant};
 
@@ -64,7 +65,7 @@ pub fn run(args: Args) -> Result<()> {
     // Under a namespace the tree goes to /NS/tf, as in multi-robot ROS 2 set-ups (tf remapped).
     let tf = node.publisher::<TFMessage>("tf", qos::reliable(100))?;
     let tf_static = node.publisher::<TFMessage>("tf_static", qos::latched())?;
-    let joint_states = node.subscription::<JointState>("joint_states", qos::reliable(100))?;
+    let joint_states = node.subscription::<JointState>(topics::JOINT_STATES, qos::reliable(100))?;
 
     let frames = Frames::new(&args.frame_prefix);
     let base = args.base_xyz.map_or(geometry.base_pose, |[x, y, z]| {

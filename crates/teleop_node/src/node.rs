@@ -2,6 +2,7 @@
 //! period, turns the answer into joint targets (crate::motion) and publishes them on
 //! /joint_commands; episode controls go to /episode/events and /sim/reset.
 
+use so101_core::contract::{services, topics};
 use std::time::{Duration, Instant};
 
 use anyhow::{Context, Result};
@@ -52,12 +53,12 @@ struct Topics {
 impl Topics {
     fn connect(node: &mut RosNode) -> Result<Self> {
         Ok(Self {
-            commands: node.publisher("joint_commands", qos::default_topic())?,
-            events: node.publisher("episode/events", qos::reliable(100))?,
-            joint_states: node.subscription("joint_states", qos::reliable(100))?,
-            cube_pose: node.subscription("cube/pose", qos::reliable(100))?,
-            task_success: node.subscription("task/success", qos::reliable(100))?,
-            reset: node.client::<Trigger>("sim/reset")?,
+            commands: node.publisher(topics::JOINT_COMMANDS, qos::default_topic())?,
+            events: node.publisher(topics::EPISODE_EVENTS, qos::reliable(100))?,
+            joint_states: node.subscription(topics::JOINT_STATES, qos::reliable(100))?,
+            cube_pose: node.subscription(topics::CUBE_POSE, qos::reliable(100))?,
+            task_success: node.subscription(topics::TASK_SUCCESS, qos::reliable(100))?,
+            reset: node.client::<Trigger>(services::SIM_RESET)?,
         })
     }
 

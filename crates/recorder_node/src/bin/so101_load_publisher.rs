@@ -6,6 +6,7 @@
 //! 0.001 + j`. At exit one JSON line on stdout: `{"published": {topic: count}, "failed": {...},
 //! "seconds": S}`.
 
+use so101_core::contract::topics;
 use std::{
     collections::BTreeMap,
     process::ExitCode,
@@ -108,7 +109,7 @@ fn run(args: Args) -> Result<()> {
             next_due: start,
             count: 0,
             failed: 0,
-            kind: StreamKind::Joints(node.publisher("joint_states", qos::default_topic())?),
+            kind: StreamKind::Joints(node.publisher(topics::JOINT_STATES, qos::default_topic())?),
         });
     }
     let (width, height) = (args.width, args.height);

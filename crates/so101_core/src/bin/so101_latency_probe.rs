@@ -4,6 +4,7 @@
 //!
 //! Must run in the same private network namespace as the node under test.
 
+use so101_core::contract::topics;
 use std::time::{Duration, Instant};
 
 use anyhow::{bail, Context, Result};
@@ -39,8 +40,8 @@ fn main() -> Result<()> {
     logging::init();
     let args = Args::parse();
     let mut node = RosNode::start("so101_latency_probe", &args.node)?;
-    let commands = node.publisher::<JointState>("joint_commands", qos::default_topic())?;
-    let states = node.subscription::<JointState>("joint_states", qos::reliable(100))?;
+    let commands = node.publisher::<JointState>(topics::JOINT_COMMANDS, qos::default_topic())?;
+    let states = node.subscription::<JointState>(topics::JOINT_STATES, qos::reliable(100))?;
 
     let discovery_deadline = Instant::now() + Duration::from_secs_f64(args.discovery_timeout);
     while states.take()?.is_none() {

@@ -3,6 +3,7 @@
 //! ros2-client's own sim-time support listens to /clock as builtin_interfaces/Time, which a standard
 //! /clock publisher does not match, so the stack subscribes rosgraph_msgs/Clock itself.
 
+use crate::contract::topics;
 use std::sync::{
     atomic::{AtomicI64, Ordering},
     Arc,
@@ -24,7 +25,7 @@ const NO_CLOCK_YET: i64 = i64::MIN;
 impl SimClock {
     /// Subscribes /clock (in the node's namespace) and keeps the latest time, until shutdown.
     pub fn subscribe(node: &mut RosNode, shutdown: Shutdown) -> Result<Self, NodeError> {
-        let subscription = node.subscription::<Clock>("clock", qos::default_topic())?;
+        let subscription = node.subscription::<Clock>(topics::CLOCK, qos::default_topic())?;
         let clock = Self {
             latest_nanos: Arc::new(AtomicI64::new(NO_CLOCK_YET)),
         };

@@ -2,6 +2,7 @@
 //! /forward_position_controller/commands), validated on intake and counted, shared by every node
 //! that moves an arm (simulation and driver).
 
+use crate::contract::topics;
 use std::time::{Duration, Instant};
 
 use ros2_client::Subscription;
@@ -29,9 +30,10 @@ pub struct CommandTally {
 impl CommandInbox {
     pub fn subscribe(node: &mut RosNode) -> Result<Self, NodeError> {
         Ok(Self {
-            joint_commands: node.subscription("joint_commands", qos::command_subscription())?,
+            joint_commands: node
+                .subscription(topics::JOINT_COMMANDS, qos::command_subscription())?,
             array_commands: node.subscription(
-                "forward_position_controller/commands",
+                topics::FORWARD_POSITION_COMMANDS,
                 qos::command_subscription(),
             )?,
             tally: CommandTally {

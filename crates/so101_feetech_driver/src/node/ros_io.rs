@@ -1,6 +1,7 @@
 //! The driver's ROS side: a publisher thread (so a slow DDS write never delays the bus cycle) and
 //! the torque_enable service.
 
+use so101_core::contract::{services, topics};
 use std::{
     sync::mpsc::{sync_channel, Receiver, SyncSender, TrySendError},
     thread::JoinHandle,
@@ -41,7 +42,7 @@ impl Outputs {
     pub fn start(node: &mut RosNode, joint_topic: &str) -> Result<Self, NodeError> {
         let joints: Publisher<JointState> = node.publisher(joint_topic, qos::default_topic())?;
         let diagnostics: Publisher<DiagnosticArray> =
-            node.publisher("diagnostics", qos::default_topic())?;
+            node.publisher(topics::DIAGNOSTICS, qos::default_topic())?;
         let (sender, receiver) = sync_channel(QUEUE);
         let thread = spawn_publisher_thread(move || publish(&joints, &diagnostics, &receiver))?;
         Ok(Self {
@@ -98,7 +99,7 @@ pub struct TorqueService {
 impl TorqueService {
     pub fn serve(node: &mut RosNode) -> Result<Self, NodeError> {
         Ok(Self {
-            server: node.server::<SetBool>("torque_enable")?,
+            server: node.server::<SetBool>(services::TORQUE_ENABLE)?,
         })
     }
 

@@ -90,16 +90,23 @@ def run_live(args, policy: StackPolicy) -> int:
         deadline = time.monotonic() + args.startup_timeout
         # The arm's node must hear the first command: wait until it has matched the publisher.
         if not spin_until(node, lambda: commands.get_subscription_count() > 0, args.startup_timeout):
-            raise SystemExit(f"so101-run-policy: no subscriber of {prefix}/joint_commands within "
-                             f"{args.startup_timeout:.0f} s (is the arm's node running?)")
+            raise SystemExit(
+                f"so101-run-policy: no subscriber of {prefix}/joint_commands within "
+                f"{args.startup_timeout:.0f} s (is the arm's node running?)"
+            )
         remaining = max(0.0, deadline - time.monotonic())
         if not spin_until(node, lambda: not inputs.stale(camera_names, args.max_age), remaining):
             missing = inputs.stale(camera_names, args.max_age)
-            raise SystemExit(f"so101-run-policy: nothing from {', '.join(missing)} within {args.startup_timeout:.0f} s "
-                             "(is the arm's node running, with these cameras?)")
+            raise SystemExit(
+                f"so101-run-policy: nothing from {', '.join(missing)} within {args.startup_timeout:.0f} s "
+                "(is the arm's node running, with these cameras?)"
+            )
         # One inference before the clock starts: the first one (allocation, kernels) is slow.
-        policy.act(policy.observation(joint_positions(inputs.state[1]),
-                                      {name: rgb_image(inputs.frames[name][1]) for name in camera_names}))
+        policy.act(
+            policy.observation(
+                joint_positions(inputs.state[1]), {name: rgb_image(inputs.frames[name][1]) for name in camera_names}
+            )
+        )
         policy.reset()
         log.info("running at %.1f Hz%s", args.fps, f" for {args.duration:.0f} s" if args.duration else " until Ctrl-C")
         begun = time.monotonic()
@@ -170,8 +177,9 @@ def evaluate(args, policy: StackPolicy) -> int:
     output = Path(args.output)
     (output / "videos").mkdir(parents=True, exist_ok=True)
     max_steps = int(round(args.episode_time * args.fps))
-    env = So101SimEnv(task=args.sim_task, control_rate=args.fps, lite=args.lite, cameras=cameras or None,
-                      dense_reward=args.reward == "dense")
+    env = So101SimEnv(
+        task=args.sim_task, control_rate=args.fps, lite=args.lite, cameras=cameras or None, dense_reward=args.reward == "dense"
+    )
     results: list[EpisodeResult] = []
     try:
         for index in tqdm(range(args.eval), desc="episodes", unit="ep", disable=args.quiet):
@@ -197,8 +205,11 @@ def evaluate(args, policy: StackPolicy) -> int:
             if video:
                 path = output / "videos" / f"episode_{index:03d}_seed{seed}.mp4"
                 write_video(path, video, fps=int(round(args.fps)))
-            results.append(EpisodeResult(seed, success, float(np.sum(rewards)), float(np.max(rewards)), len(rewards),
-                                         str(path) if path else None))
+            results.append(
+                EpisodeResult(
+                    seed, success, float(np.sum(rewards)), float(np.max(rewards)), len(rewards), str(path) if path else None
+                )
+            )
     finally:
         env.close()
 
@@ -216,29 +227,46 @@ def evaluate(args, policy: StackPolicy) -> int:
         "fps": args.fps,
         "episode_time_s": args.episode_time,
     }
-    (output / "eval_info.json").write_text(json.dumps({"aggregated": summary, "per_episode": [asdict(r) for r in results]}, indent=2))
+    (output / "eval_info.json").write_text(
+        json.dumps({"aggregated": summary, "per_episode": [asdict(r) for r in results]}, indent=2)
+    )
     for r in results:
-        print(f"seed {r.seed:>4}: {'success' if r.success else 'failure'} after {r.steps} steps, "
-              f"reward sum {r.sum_reward:.2f} (max {r.max_reward:.2f})")
-    print(f"{len(results)} episode(s): success {summary['pc_success']:.0f} %, mean reward {summary['avg_sum_reward']:.2f}, "
-          f"best {summary['best_sum_reward']:.2f}; videos and eval_info.json in {output}")
+        print(
+            f"seed {r.seed:>4}: {'success' if r.success else 'failure'} after {r.steps} steps, "
+            f"reward sum {r.sum_reward:.2f} (max {r.max_reward:.2f})"
+        )
+    print(
+        f"{len(results)} episode(s): success {summary['pc_success']:.0f} %, mean reward {summary['avg_sum_reward']:.2f}, "
+        f"best {summary['best_sum_reward']:.2f}; videos and eval_info.json in {output}"
+    )
     return 0
 
 
 # =========================================================================== entry point
 def parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(prog="so101-run-policy", description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p = argparse.ArgumentParser(
+        prog="so101-run-policy", description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
     p.add_argument("policy", help="a LeRobot policy: a pretrained_model directory or a Hugging Face Hub id")
     p.add_argument("--fps", type=float, default=30.0, help="control rate: the fps of the policy's training dataset")
-    p.add_argument("--units", choices=["lerobot", "radians"], default="lerobot",
-                   help="joint units the policy was trained in (so101-bag-to-lerobot's default is lerobot)")
+    p.add_argument(
+        "--units",
+        choices=["lerobot", "radians"],
+        default="lerobot",
+        help="joint units the policy was trained in (so101-bag-to-lerobot's default is lerobot)",
+    )
     p.add_argument("--task", default=DEFAULT_TASK, help="task text for language-conditioned policies")
     p.add_argument("--device", default=None, help="torch device (default: cuda when available, else cpu)")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     live = p.add_argument_group("live")
     live.add_argument("--namespace", default="", help="the arm's namespace (topics under /NAMESPACE/)")
-    live.add_argument("--camera", action="append", default=[], metavar="NAME=TOPIC",
-                      help="take the policy's camera NAME from TOPIC (default /camera/NAME/image_raw)")
+    live.add_argument(
+        "--camera",
+        action="append",
+        default=[],
+        metavar="NAME=TOPIC",
+        help="take the policy's camera NAME from TOPIC (default /camera/NAME/image_raw)",
+    )
     live.add_argument("--duration", type=float, default=0.0, help="stop after this many seconds (0: at Ctrl-C)")
     live.add_argument("--max-age", type=float, default=0.5, help="inputs older than this (s) hold the arm")
     live.add_argument("--startup-timeout", type=float, default=30.0, help="seconds to wait for the first inputs")
@@ -248,11 +276,18 @@ def parser() -> argparse.ArgumentParser:
     ev.add_argument("--seed", type=int, default=0, help="seed of the first episode (then seed+1, ...)")
     ev.add_argument("--episode-time", type=float, default=20.0, help="sim seconds before an episode counts as failed")
     ev.add_argument("--sim-task", default="cube_to_bin", choices=["cube_to_bin", "touch_cube"], help="the sim's task")
-    ev.add_argument("--reward", choices=["dense", "sparse"], default="dense",
-                    help="the sim's reward: dense shows how close a failed episode came (cube_to_bin)")
+    ev.add_argument(
+        "--reward",
+        choices=["dense", "sparse"],
+        default="dense",
+        help="the sim's reward: dense shows how close a failed episode came (cube_to_bin)",
+    )
     ev.add_argument("--lite", action="store_true", help="sim without meshes (faster to render on a CPU)")
-    ev.add_argument("--video-camera", default=None,
-                    help="film this camera (320x240) instead of the policy's cameras (default for a policy without cameras: front)")
+    ev.add_argument(
+        "--video-camera",
+        default=None,
+        help="film this camera (320x240) instead of the policy's cameras (default for a policy without cameras: front)",
+    )
     ev.add_argument("--output", default="eval", help="directory for eval_info.json and videos/")
     return p
 

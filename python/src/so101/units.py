@@ -7,13 +7,15 @@ import math
 
 import numpy as np
 
-JOINT_NAMES = ["shoulder_pan", "shoulder_lift", "elbow_flex", "wrist_flex", "wrist_roll", "gripper"]
+from . import contract
+
+JOINT_NAMES = list(contract.JOINT_NAMES)
 # LeRobot's feature names for state and action.
 FEATURE_NAMES = [f"{name}.pos" for name in JOINT_NAMES]
 # Joint limits (rad) of the robot model, shared by the sim and the driver, in contract order.
-JOINT_LIMITS = np.array([(-1.9199, 1.9199), (-1.7453, 1.7453), (-1.69, 1.69), (-1.6581, 1.6581), (-2.7438, 2.8412), (-0.1745, 1.7453)])
+JOINT_LIMITS = np.array(contract.JOINT_LIMITS)
 # The gripper's range in the stack (the model's limits, shared by sim and driver), rad.
-GRIPPER_CLOSED, GRIPPER_OPEN = -0.1745, 1.7453
+GRIPPER_CLOSED, GRIPPER_OPEN = contract.JOINT_LIMITS[-1]
 
 
 def lerobot_from_radians(positions: np.ndarray) -> np.ndarray:

@@ -4,13 +4,14 @@ subscriber process that counts the messages of one topic, and how a report is pu
 from __future__ import annotations
 
 import json
-import os
+
+from so101.paths import node_environment
 
 
 def node_env(rust_log: str, keep_callers_level: bool = False) -> dict:
-    """The environment for a Rust node: the venv's Python carries an LD_LIBRARY_PATH into the ROS
-    wheels, which the nodes must not load; RUST_LOG as given (or as the caller set it)."""
-    env = {k: v for k, v in os.environ.items() if k != "LD_LIBRARY_PATH"}
+    """The environment for a Rust node (so101.paths.node_environment) with RUST_LOG as given, or as
+    the caller set it when `keep_callers_level`."""
+    env = node_environment()
     if keep_callers_level:
         env.setdefault("RUST_LOG", rust_log)
     else:

@@ -5,10 +5,9 @@ Prints once a second what a ROS 2 user would see on the topics: sim time, joint 
 cube's position, the task's reward and success, and the frames per second of each camera. Must run inside a private network namespace
 (scripts/run_sim_demo.sh takes care of it).
 """
+
 import argparse
-import os
 import signal
-import subprocess
 import sys
 import time
 
@@ -18,10 +17,19 @@ from rclpy.node import Node
 from sensor_msgs.msg import Image, JointState
 from std_msgs.msg import Bool, Float64
 
+from so101 import process
+from so101.contract import CAMERA_NAMES
+from so101.paths import node_environment
 
-CAMERAS = ("top", "front", "wrist")
-SHORT_NAMES = {"shoulder_pan": "pan", "shoulder_lift": "lift", "elbow_flex": "elbow",
-               "wrist_flex": "wrist", "wrist_roll": "roll", "gripper": "grip"}
+CAMERAS = CAMERA_NAMES
+SHORT_NAMES = {
+    "shoulder_pan": "pan",
+    "shoulder_lift": "lift",
+    "elbow_flex": "elbow",
+    "wrist_flex": "wrist",
+    "wrist_roll": "roll",
+    "gripper": "grip",
+}
 
 
 class Watcher(Node):
@@ -66,8 +74,10 @@ class Watcher(Node):
         cube = f"cube=({self.cube.x:.3f},{self.cube.y:.3f},{self.cube.z:.3f})" if self.cube else "cube=?"
         cameras = " ".join(f"{name}={self.frames[name] - self.frames_at_last_line[name]}" for name in CAMERAS)
         self.frames_at_last_line = dict(self.frames)
-        return (f"t={stamp:7.2f}s {joints} {cube} reward={self.reward if self.reward is not None else float('nan'):.2f}"
-                f" in_bin={self.success} drops_in_bin={self.successes} frames/s: {cameras}")
+        return (
+            f"t={stamp:7.2f}s {joints} {cube} reward={self.reward if self.reward is not None else float('nan'):.2f}"
+            f" in_bin={self.success} drops_in_bin={self.successes} frames/s: {cameras}"
+        )
 
 
 def main():
@@ -76,9 +86,7 @@ def main():
     parser.add_argument("--duration", type=float, default=None, help="stop after this many seconds")
     args, node_flags = parser.parse_known_args()
 
-    # The venv's Python runs with LD_LIBRARY_PATH pointing into the ROS wheels; the Rust node needs none.
-    node_env = {k: v for k, v in os.environ.items() if k != "LD_LIBRARY_PATH"}
-    sim = subprocess.Popen([args.node, "--demo", *node_flags], env=node_env)
+    sim = process.start([args.node, "--demo", *node_flags], env=node_environment(), stdin=None)
     rclpy.init()
     watcher = Watcher()
     stop = {"now": False}
@@ -94,13 +102,13 @@ def main():
             if args.duration is not None and time.monotonic() - start > args.duration:
                 break
     finally:
-        if sim.poll() is None:
-            sim.send_signal(signal.SIGINT)
-        code = sim.wait(timeout=10)
+        code = process.stop(sim)
         watcher.destroy_node()
         rclpy.shutdown()
     frames = ", ".join(f"{name} {count}" for name, count in watcher.frames.items())
-    print(f"so101_sim_node exited with {code}; cube dropped in the bin {watcher.successes} time(s); camera frames received: {frames}")
+    print(
+        f"so101_sim_node exited with {code}; cube dropped in the bin {watcher.successes} time(s); camera frames received: {frames}"
+    )
     return 0 if code == 0 else 1
 
 

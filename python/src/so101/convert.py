@@ -24,7 +24,7 @@ from .resample import frame_times, sample_and_hold
 from .units import FEATURE_NAMES, lerobot_from_radians
 
 ROBOT_TYPE = "so_follower"
-log = logging.getLogger("so101_lerobot")
+log = logging.getLogger("so101.convert")
 
 
 @dataclass
@@ -39,7 +39,7 @@ class Frames:
 
 
 def frames_of(episode: Episode, fps: float, units: str) -> Frames:
-    """Resamples an episode onto the fps grid (alignment: so101_lerobot.resample)."""
+    """Resamples an episode onto the fps grid (alignment: so101.resample)."""
     streams = {"joint_states": episode.joint_states.times, "joint_commands": episode.joint_commands.times}
     streams.update({f"camera {name}": stream.times for name, stream in episode.cameras.items()})
     # Commands stay in force after the last one (a teleop stops sending while holding); every
@@ -56,10 +56,11 @@ def frames_of(episode: Episode, fps: float, units: str) -> Frames:
 
     convert = (lambda v: v) if units == "radians" else lerobot_from_radians
     state = convert(np.stack([episode.joint_states.values[i] for i in sample_and_hold(episode.joint_states.times, instants)]))
-    action = convert(np.stack([episode.joint_commands.values[i] for i in sample_and_hold(episode.joint_commands.times, instants)]))
+    action = convert(
+        np.stack([episode.joint_commands.values[i] for i in sample_and_hold(episode.joint_commands.times, instants)])
+    )
     images = {
-        name: [stream.values[i] for i in sample_and_hold(stream.times, instants)]
-        for name, stream in episode.cameras.items()
+        name: [stream.values[i] for i in sample_and_hold(stream.times, instants)] for name, stream in episode.cameras.items()
     }
     success = np.array(held(episode.task_success, False), dtype=bool)
     if episode.success is not None:
@@ -136,7 +137,9 @@ def convert(args) -> int:
                 robot_type=ROBOT_TYPE,
                 use_videos=not args.no_videos,
             )
-        elif list(shapes) != cameras or any(dataset.features[f"observation.images.{n}"]["shape"][:2] != tuple(s) for n, s in shapes.items()):
+        elif list(shapes) != cameras or any(
+            dataset.features[f"observation.images.{n}"]["shape"][:2] != tuple(s) for n, s in shapes.items()
+        ):
             error = f"{path.name}: cameras {shapes} differ from the dataset's ({cameras})"
             log.warning("skipped %s", error)
             skipped.append(error)
@@ -173,14 +176,19 @@ def convert(args) -> int:
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="so101-bag-to-lerobot", description=__doc__,
-                                     formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser = argparse.ArgumentParser(
+        prog="so101-bag-to-lerobot", description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
     parser.add_argument("bags", nargs="+", help="episode bag directories, or directories holding episode_* directories")
     parser.add_argument("--output", type=Path, required=True, help="dataset root directory (must not exist yet)")
     parser.add_argument("--repo-id", default="local/so101_cube_to_bin", help="dataset id (Hub repo id when pushed)")
     parser.add_argument("--fps", type=int, default=30, help="frames per second of the dataset")
-    parser.add_argument("--units", choices=["lerobot", "radians"], default="lerobot",
-                        help="joint units: LeRobot's SO-101 conventions (degrees, gripper 0-100) or the stack's radians")
+    parser.add_argument(
+        "--units",
+        choices=["lerobot", "radians"],
+        default="lerobot",
+        help="joint units: LeRobot's SO-101 conventions (degrees, gripper 0-100) or the stack's radians",
+    )
     parser.add_argument("--cameras", default=None, help="cameras to keep, comma-separated (default: every camera in the bags)")
     parser.add_argument("--task", default="put the cube in the bin", help="task text of episodes whose bag names none")
     parser.add_argument("--successful-only", action="store_true", help="keep only episodes marked successful")

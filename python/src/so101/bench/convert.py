@@ -7,6 +7,7 @@ The bags are made first: so101_sim_node (--lite, --speed 2, three cameras at the
 30 Hz), recorder_node and the scripted expert, N episodes. Must run inside one private network
 namespace (scripts/bench.sh does that). Prints a Markdown report; --json keeps the numbers.
 """
+
 from __future__ import annotations
 
 import argparse
@@ -16,7 +17,7 @@ import tempfile
 import time
 from pathlib import Path
 
-import bench_common
+from so101.bench import common as bench_common
 
 
 def node_env() -> dict:
@@ -26,14 +27,35 @@ def node_env() -> dict:
 def record(bin_dir: Path, bags: Path, episodes: int, size: str) -> float:
     """Records `episodes` expert episodes into `bags`; returns the wall seconds it took."""
     started = time.monotonic()
-    sim = subprocess.Popen([str(bin_dir / "so101_sim_node"), "--lite", "--speed", "2", "--seed", "1",
-                            "--cameras", "top,front,wrist", "--camera-size", size, "--camera-rate", "30"],
-                           env=node_env(), stderr=subprocess.DEVNULL)
-    recorder = subprocess.Popen([str(bin_dir / "recorder_node"), "--output", str(bags)], env=node_env(),
-                                stderr=subprocess.DEVNULL)
+    sim = subprocess.Popen(
+        [
+            str(bin_dir / "so101_sim_node"),
+            "--lite",
+            "--speed",
+            "2",
+            "--seed",
+            "1",
+            "--cameras",
+            "top,front,wrist",
+            "--camera-size",
+            size,
+            "--camera-rate",
+            "30",
+        ],
+        env=node_env(),
+        stderr=subprocess.DEVNULL,
+    )
+    recorder = subprocess.Popen(
+        [str(bin_dir / "recorder_node"), "--output", str(bags)], env=node_env(), stderr=subprocess.DEVNULL
+    )
     try:
-        subprocess.run([str(bin_dir / "teleop_node"), "--source", "expert", "--sim-time", "--episodes", str(episodes)],
-                       env=node_env(), check=True, stderr=subprocess.DEVNULL, timeout=60 * episodes + 120)
+        subprocess.run(
+            [str(bin_dir / "teleop_node"), "--source", "expert", "--sim-time", "--episodes", str(episodes)],
+            env=node_env(),
+            check=True,
+            stderr=subprocess.DEVNULL,
+            timeout=60 * episodes + 120,
+        )
         time.sleep(1.0)
     finally:
         for process in (recorder, sim):
@@ -46,7 +68,7 @@ def convert(bags: Path, output: Path) -> dict:
     """Runs the converter in this process with encode_video_frames timed."""
     import lerobot.datasets.dataset_writer as writer
 
-    from so101_lerobot import convert as converter
+    from so101 import convert as converter
 
     spent = {"encode": 0.0, "videos": 0}
     original = writer.encode_video_frames
@@ -90,9 +112,11 @@ def main() -> int:
             print(f"{size}: {result}", file=sys.stderr)
     lines = ["| cameras | episodes | frames | conversion s | frames/s | share in video encoding |", "|---|---|---|---|---|---|"]
     for size, r in results.items():
-        lines.append(f"| 3 x {size} rgb8 @ 30 Hz | {args.episodes} | {r['frames']} | {r['seconds']:.1f} | "
-                     f"**{r['frames'] / r['seconds']:.1f}** | **{100 * r['encode_seconds'] / r['seconds']:.0f} %** "
-                     f"({r['videos']} videos, {r['encode_seconds']:.1f} s) |")
+        lines.append(
+            f"| 3 x {size} rgb8 @ 30 Hz | {args.episodes} | {r['frames']} | {r['seconds']:.1f} | "
+            f"**{r['frames'] / r['seconds']:.1f}** | **{100 * r['encode_seconds'] / r['seconds']:.0f} %** "
+            f"({r['videos']} videos, {r['encode_seconds']:.1f} s) |"
+        )
     return bench_common.report(lines, results, args.json)
 
 

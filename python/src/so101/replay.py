@@ -45,8 +45,9 @@ def actions_from_bag(path: Path) -> tuple[np.ndarray, np.ndarray]:
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="so101-replay", description=__doc__,
-                                     formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser = argparse.ArgumentParser(
+        prog="so101-replay", description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
     parser.add_argument("source", type=Path, help="a LeRobot dataset root, or an episode bag directory")
     parser.add_argument("--episode", type=int, default=0, help="dataset episode index")
     parser.add_argument("--repo-id", default="local/so101_cube_to_bin", help="the dataset's repo id")

@@ -1,6 +1,6 @@
 """Gymnasium environments over so101_sim_node in lockstep: `so101/CubeToBin-v0` and
-`so101/TouchCube-v0`, registered when this module is imported
-(`gym.make("so101_lerobot.gym_env:so101/CubeToBin-v0")` imports it by itself). Each environment
+`so101/TouchCube-v0`, registered by `import so101`
+(`gym.make("so101:so101/CubeToBin-v0")` imports it by itself). Each environment
 starts its own sim node, under a namespace of its own, and talks to it through rclpy: a step publishes the action on /joint_commands and calls
 /sim/step, so Stable-Baselines3, imitation and the like run against the stack's real interface.
 
@@ -16,16 +16,16 @@ are truncated by the registration's max_episode_steps.
 from __future__ import annotations
 
 import os
-import signal
-import uuid
 import subprocess
 import tempfile
 import time
+import uuid
 
 import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
 
+from . import process
 from .messages import joint_positions, rgb_image
 from .paths import node_binary, node_environment
 from .units import JOINT_LIMITS, JOINT_NAMES
@@ -34,8 +34,15 @@ from .units import JOINT_LIMITS, JOINT_NAMES
 class So101SimEnv(gym.Env):
     metadata = {"render_modes": []}
 
-    def __init__(self, task: str = "cube_to_bin", control_rate: float = 30.0, lite: bool = True, timeout: float = 20.0,
-                 cameras: dict[str, tuple[int, int]] | None = None, dense_reward: bool = False):
+    def __init__(
+        self,
+        task: str = "cube_to_bin",
+        control_rate: float = 30.0,
+        lite: bool = True,
+        timeout: float = 20.0,
+        cameras: dict[str, tuple[int, int]] | None = None,
+        dense_reward: bool = False,
+    ):
         import rclpy
         from geometry_msgs.msg import PoseStamped
         from rclpy.executors import SingleThreadedExecutor
@@ -43,7 +50,9 @@ class So101SimEnv(gym.Env):
         from std_msgs.msg import Bool, Float64
         from std_srvs.srv import Trigger
 
-        self.action_space = spaces.Box(JOINT_LIMITS[:, 0].astype(np.float32), JOINT_LIMITS[:, 1].astype(np.float32), dtype=np.float32)
+        self.action_space = spaces.Box(
+            JOINT_LIMITS[:, 0].astype(np.float32), JOINT_LIMITS[:, 1].astype(np.float32), dtype=np.float32
+        )
         state_space = spaces.Box(-np.inf, np.inf, shape=(19,), dtype=np.float32)
         self._cameras = dict(cameras or {})
         if self._cameras:
@@ -71,6 +80,7 @@ class So101SimEnv(gym.Env):
                 self._latest[key] = msg
                 if key in self._counts:
                     self._counts[key] += 1
+
             return callback
 
         self._node.create_subscription(JointState, f"{ns}/joint_states", keep("state"), 10)
@@ -112,14 +122,28 @@ class So101SimEnv(gym.Env):
         cameras = ",".join(f"{name}:{w}x{h}" for name, (h, w) in self._cameras.items()) or "none"
         # One frame per camera per step: cameras render at the control rate, in lockstep at the
         # sim-time instant of each step's state.
-        command = [str(binary), "--lockstep", "--rate", str(self._rate), "--task", self._task, "--seed", str(seed),
-                   "--cameras", cameras, "--camera-rate", str(self._rate), "--namespace", self._namespace]
+        command = [
+            str(binary),
+            "--lockstep",
+            "--rate",
+            str(self._rate),
+            "--task",
+            self._task,
+            "--seed",
+            str(seed),
+            "--cameras",
+            cameras,
+            "--camera-rate",
+            str(self._rate),
+            "--namespace",
+            self._namespace,
+        ]
         if self._lite:
             command.append("--lite")
         if self._dense_reward:
             command.append("--dense-reward")
         self._sent = 0
-        self._process = subprocess.Popen(command, env=node_environment(), stdin=subprocess.DEVNULL, stdout=self._log, stderr=self._log)
+        self._process = process.start(command, env=node_environment(), stdout=self._log, stderr=self._log)
         self._spin_until(lambda: self._step_client.service_is_ready() and self._reset_client.service_is_ready(), "services")
         self._spin_until(lambda: self._commands.get_subscription_count() > 0, "/joint_commands subscription")
         # Both directions of each service matched, and the start-up state taken in.
@@ -128,13 +152,8 @@ class So101SimEnv(gym.Env):
             self._executor.spin_once(timeout_sec=0.01)
 
     def _stop_sim(self) -> None:
-        if self._process is not None and self._process.poll() is None:
-            self._process.send_signal(signal.SIGINT)
-            try:
-                self._process.wait(timeout=10)
-            except subprocess.TimeoutExpired:
-                self._process.kill()
-                self._process.wait()
+        if self._process is not None:
+            process.stop(self._process)
         self._process = None
         self._latest.clear()
 
@@ -206,12 +225,8 @@ class So101SimEnv(gym.Env):
 
 
 def register_envs() -> None:
-    """Registers the environments (done at import)."""
+    """Registers the environments (`import so101` does)."""
     ids = {"so101/CubeToBin-v0": ("cube_to_bin", 600), "so101/TouchCube-v0": ("touch_cube", 300)}
     for env_id, (task, steps) in ids.items():
         if env_id not in gym.registry:
-            gym.register(env_id, entry_point="so101_lerobot.gym_env:So101SimEnv", kwargs={"task": task},
-                         max_episode_steps=steps)
-
-
-register_envs()
+            gym.register(env_id, entry_point="so101.gym_env:So101SimEnv", kwargs={"task": task}, max_episode_steps=steps)

@@ -11,11 +11,11 @@ Modes
             6-joint JointState between /bench/ping and /bench/pong; reports the round trip.
 
 Run it with the venv's python, inside the project's network namespace (the caller wraps it):
-    scripts/isolated .venv/bin/python scripts/bench_latency.py --pingpong
+    scripts/isolated .venv/bin/python -m so101.bench.latency --pingpong
     scripts/isolated bash -c '$SO101_BIN_DIR/so101_sim_node --lite & sleep 2;
-                              .venv/bin/python scripts/bench_latency.py; kill -INT %1; wait'
+                              .venv/bin/python -m so101.bench.latency; kill -INT %1; wait'
 or let it start the node itself (same namespace, it is its child):
-    scripts/isolated .venv/bin/python scripts/bench_latency.py --spawn-node -- --rate 100
+    scripts/isolated .venv/bin/python -m so101.bench.latency --spawn-node -- --rate 100
 """
 
 from __future__ import annotations
@@ -29,28 +29,20 @@ import signal
 import subprocess
 import sys
 import time
-from pathlib import Path
 
-from so101_lerobot.isolation import network_namespace_problem
-
-REPO_ROOT = Path(__file__).resolve().parents[1]
-JOINT_NAMES = ["shoulder_pan", "shoulder_lift", "elbow_flex", "wrist_flex", "wrist_roll", "gripper"]
+from so101.contract import JOINT_NAMES
+from so101.isolation import network_namespace_problem
+from so101.paths import node_binary, node_environment, repo_root
+from so101.process import start
+from so101.process import stop as stop_process
 
 
 def set_default_environment() -> None:
     os.environ.setdefault("RMW_IMPLEMENTATION", "rmw_fastrtps_cpp")
-    os.environ.setdefault("FASTRTPS_DEFAULT_PROFILES_FILE", str(REPO_ROOT / "scripts" / "fastdds_profile.xml"))
+    os.environ.setdefault("FASTRTPS_DEFAULT_PROFILES_FILE", str(repo_root() / "python" / "fastdds_profile.xml"))
 
 
 # --------------------------------------------------------------------------- statistics
-def stop_process(process: subprocess.Popen) -> None:
-    """SIGINT, then SIGKILL if it has not exited within 10 s."""
-    process.send_signal(signal.SIGINT)
-    try:
-        process.wait(timeout=10)
-    except subprocess.TimeoutExpired:
-        process.kill()
-        process.wait()
 
 
 def percentile(sorted_values: list[float], q: float) -> float:
@@ -135,7 +127,7 @@ def run_pingpong(args) -> dict:
     from rclpy.executors import SingleThreadedExecutor
     from sensor_msgs.msg import JointState
 
-    child = subprocess.Popen([sys.executable, os.path.abspath(__file__), "--role", "echo"])
+    child = start([sys.executable, "-m", "so101.bench.latency", "--role", "echo"], stdin=None)
     rclpy.init()
     node = rclpy.create_node("bench_pingpong")
     executor = SingleThreadedExecutor()
@@ -198,28 +190,16 @@ def run_pingpong(args) -> dict:
 
 # --------------------------------------------------------------------------- node reaction
 def spawn_node(node_args: list[str], full_scene: bool = False) -> subprocess.Popen:
-    bin_dir = os.environ.get("SO101_BIN_DIR")
-    if not bin_dir:
-        raise SystemExit("bench_latency: --spawn-node needs SO101_BIN_DIR (directory of so101_sim_node)")
-    binary = Path(bin_dir) / "so101_sim_node"
-    if not os.access(binary, os.X_OK):
-        raise SystemExit(f"bench_latency: {binary} not found or not executable")
-    env = dict(os.environ)
-    # The venv's .pth bootstrapper put ROS wheel libraries on LD_LIBRARY_PATH; keep them away
-    # from the Rust node.
-    prefix = os.path.realpath(sys.prefix)
-    parts = [p for p in env.get("LD_LIBRARY_PATH", "").split(os.pathsep) if p and not os.path.realpath(p).startswith(prefix)]
-    if parts:
-        env["LD_LIBRARY_PATH"] = os.pathsep.join(parts)
-    else:
-        env.pop("LD_LIBRARY_PATH", None)
-    env.pop("_ROS_WHEELS_BOOTSTRAP_COMPLETE", None)
+    try:
+        binary = node_binary("so101_sim_node")
+    except FileNotFoundError as error:
+        raise SystemExit(f"bench latency: {error}") from error
     args = list(node_args)
     if not full_scene and "--lite" not in args:
         args.insert(0, "--lite")
     if "--cameras" not in args:
         args[:0] = ["--cameras", "none"]
-    return subprocess.Popen([str(binary), *args], env=env, cwd=REPO_ROOT)
+    return start([binary, *args], env=node_environment(), stdin=None)
 
 
 def run_node(args) -> dict:
@@ -245,8 +225,7 @@ def run_node(args) -> dict:
             args.discovery_timeout,
         ):
             raise RuntimeError(
-                f"no node on {ns}/joint_commands + {ns}/joint_states "
-                "(start it in the same namespace, or pass --spawn-node)"
+                f"no node on {ns}/joint_commands + {ns}/joint_states (start it in the same namespace, or pass --spawn-node)"
             )
         # Observed publish rate, to put the numbers in context.
         arrivals.clear()
@@ -307,7 +286,7 @@ def main(argv: list[str] | None = None) -> int:
     if problem:
         print(
             f"bench_latency: refusing to open a DDS participant: {problem}.\n"
-            "Run it inside the project's namespace: scripts/isolated .venv/bin/python scripts/bench_latency.py ...",
+            "Run it inside the project's namespace: scripts/isolated .venv/bin/python -m so101.bench.latency ...",
             file=sys.stderr,
         )
         return 2
@@ -324,7 +303,7 @@ def main(argv: list[str] | None = None) -> int:
         result["rmw"] = rclpy.utilities.get_rmw_implementation_identifier()
     except Exception:  # noqa: BLE001 - informative only
         pass
-    result["python"] = "%d.%d.%d" % sys.version_info[:3]
+    result["python"] = ".".join(str(part) for part in sys.version_info[:3])
     print(json.dumps(result), flush=True)
     return 0 if result["samples"] > 0 else 1
 

@@ -19,13 +19,15 @@ import glob
 import json
 import os
 import shutil
-import signal
 import statistics
 import subprocess
 import sys
 import tempfile
 import time
 from pathlib import Path
+
+from so101 import process
+from so101.paths import node_environment
 
 CLOCK_TICKS = os.sysconf("SC_CLK_TCK")
 
@@ -37,17 +39,22 @@ def cpu_seconds(pid: int) -> float:
 
 def record(bin_dir: Path, out: Path, publisher_args: list[str]) -> dict:
     """Runs the recorder (--start) while the load publisher publishes; returns counts and times."""
-    env = {k: v for k, v in os.environ.items() if k not in ("LD_LIBRARY_PATH", "_ROS_WHEELS_BOOTSTRAP_COMPLETE")}
-    env["RUST_LOG"] = "warn"
+    env = node_environment(rust_log="warn")
     recorder = subprocess.Popen(
         [str(bin_dir / "recorder_node"), "--output", str(out), "--start"],
-        env=env, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True,
+        env=env,
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.PIPE,
+        text=True,
     )
     time.sleep(0.5)
     cpu_before = cpu_seconds(recorder.pid)
     publisher = subprocess.run(
         [str(bin_dir / "so101_load_publisher"), *publisher_args],
-        env=env, capture_output=True, text=True, timeout=300,
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=300,
     )
     if publisher.returncode != 0:
         recorder.kill()
@@ -55,8 +62,7 @@ def record(bin_dir: Path, out: Path, publisher_args: list[str]) -> dict:
     published = json.loads(publisher.stdout.strip().splitlines()[-1])
     time.sleep(1.0)
     cpu = cpu_seconds(recorder.pid) - cpu_before
-    recorder.send_signal(signal.SIGINT)
-    _, stderr = recorder.communicate(timeout=60)
+    _, stderr = process.interrupt_and_collect(recorder, timeout=60)
     if recorder.returncode != 0:
         raise RuntimeError(f"recorder failed: {stderr[-2000:]}")
     import yaml
@@ -121,7 +127,9 @@ def rust_write(bin_dir: Path, bag: str, out: Path, mode: str, fsync: bool) -> fl
     done = subprocess.run(
         [str(bin_dir / "bag_write_bench"), "--input", bag, "--output", str(out), "--mode", mode]
         + ([] if fsync else ["--no-fsync"]),
-        capture_output=True, text=True, timeout=600,
+        capture_output=True,
+        text=True,
+        timeout=600,
     )
     if done.returncode != 0:
         raise RuntimeError(done.stderr)
@@ -180,7 +188,9 @@ def main() -> int:
                     clean_page_cache()
                     time.sleep(0.5)
                     times[name].append(writers[name](repeat))
-                    for leftover in list(work.glob(f"raw{repeat}")) + list(work.glob(f"rust{repeat}")) + list(work.glob(f"py{repeat}.mcap")):
+                    for leftover in (
+                        list(work.glob(f"raw{repeat}")) + list(work.glob(f"rust{repeat}")) + list(work.glob(f"py{repeat}.mcap"))
+                    ):
                         shutil.rmtree(leftover) if leftover.is_dir() else leftover.unlink()
             results["writers"]["fsync" if durable else "page_cache"] = {
                 "seconds": {k: statistics.median(v) for k, v in times.items()},
@@ -194,7 +204,9 @@ def main() -> int:
     print("\n## Stack load (2 x 640x480 rgb8 @ 30 Hz + JointState @ 500 Hz)")
     print(f"published {load['published']}, recorded {load['recorded']}, missing {lost}, dropped {load['dropped']}")
     mb = load["file_bytes"] / 1e6 / load["publish_seconds"]
-    print(f"recorder CPU {100 * load['recorder_cpu_seconds'] / (load['publish_seconds'] + 1):.1f} % of a core, {mb:.1f} MB/s into the bag")
+    print(
+        f"recorder CPU {100 * load['recorder_cpu_seconds'] / (load['publish_seconds'] + 1):.1f} % of a core, {mb:.1f} MB/s into the bag"
+    )
     print("\n## Sustained: two 640x480 rgb8 cameras at rising rates + JointState @ 500 Hz")
     print("| camera rate (Hz) | published | recorded | missing | reported lost | MB/s into the bag | messages/s | recorder CPU |")
     print("|---|---|---|---|---|---|---|---|")
@@ -208,11 +220,15 @@ def main() -> int:
     for mode, title in (("page_cache", "page cache (no fsync): the writers' own cost"), ("fsync", "fsync included: this disk")):
         seconds = writers[mode]["seconds"]
         mbps = {k: writers["bytes"] / 1e6 / v for k, v in seconds.items()}
-        print(f"\n## Writers on the same {writers['messages']} messages ({writers['bytes'] / 1e6:.0f} MB), {title}, medians of {args.repeats}")
+        print(
+            f"\n## Writers on the same {writers['messages']} messages ({writers['bytes'] / 1e6:.0f} MB), {title}, medians of {args.repeats}"
+        )
         print("| writer | MB/s | messages/s | ratio to raw write | ratio to Python mcap |")
         print("|---|---|---|---|---|")
         for key in ("raw", "recorder_bag_writer", "python_mcap"):
-            print(f"| {key} | {mbps[key]:.0f} | {writers['messages'] / seconds[key]:.0f} | {mbps[key] / mbps['raw']:.2f} | {mbps[key] / mbps['python_mcap']:.2f} |")
+            print(
+                f"| {key} | {mbps[key]:.0f} | {writers['messages'] / seconds[key]:.0f} | {mbps[key] / mbps['raw']:.2f} | {mbps[key] / mbps['python_mcap']:.2f} |"
+            )
     if args.json:
         args.json.write_text(json.dumps(results, indent=2))
     return 0

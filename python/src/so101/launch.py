@@ -41,11 +41,12 @@ import time
 from dataclasses import dataclass
 from pathlib import Path
 
+from . import process as processes
 from .isolation import network_namespace_problem
-from .paths import ISOLATED, REPO_ROOT, node_binary, node_environment
+from .paths import asset, isolated_wrapper, node_binary, node_environment
 
 # The arm `--robot real --emulate` emulates unless the user names a calibration.
-EMULATED_ARM_CALIBRATION = REPO_ROOT / "assets" / "emulated_arm" / "so101_calibration.json"
+EMULATED_ARM_CALIBRATION = "emulated_arm/so101_calibration.json"  # under assets/
 
 
 @dataclass
@@ -87,13 +88,18 @@ def plan(args) -> list[NodeSpec]:
             port = port or str(Path(args.log_dir) / "servo_bus")
             # The emulated servos come configured as the calibration the driver reads says.
             if not calibration and not args.robot_id:
-                calibration = str(EMULATED_ARM_CALIBRATION)
+                calibration = str(asset(EMULATED_ARM_CALIBRATION))
             arm = Path(calibration) if calibration else lerobot_calibration_file(args.robot_id)
             if not arm.is_file():
                 raise SystemExit(f"so101-launch: no calibration file {arm} for the emulated arm")
-            specs.append(NodeSpec("so101_servo_emulator", [str(node_binary("so101_servo_emulator")), "--link", port,
-                                                           "--calibration", str(arm)],
-                                  ready=f"path {port}", open_stdin=True))
+            specs.append(
+                NodeSpec(
+                    "so101_servo_emulator",
+                    [str(node_binary("so101_servo_emulator")), "--link", port, "--calibration", str(arm)],
+                    ready=f"path {port}",
+                    open_stdin=True,
+                )
+            )
         if not port:
             raise SystemExit("so101-launch: --robot real needs --port (or --emulate)")
         driver = [str(node_binary("so101_feetech_driver")), "--port", port, *ns]
@@ -112,8 +118,11 @@ def plan(args) -> list[NodeSpec]:
             specs.append(NodeSpec("leader_arm", leader, ready="publisher /leader/joint_states"))
 
     if args.tf:
-        specs.append(NodeSpec("so101_state_publisher", [str(node_binary("so101_state_publisher")), *ns],
-                              ready="publisher /robot_description"))
+        specs.append(
+            NodeSpec(
+                "so101_state_publisher", [str(node_binary("so101_state_publisher")), *ns], ready="publisher /robot_description"
+            )
+        )
     if args.rerun:
         sink = args.rerun
         if sink == "spawn":
@@ -123,8 +132,9 @@ def plan(args) -> list[NodeSpec]:
         else:
             sink_args = ["--save", sink]
         # Only the bridge subscribes to the task's reward this early (the recorder starts after it).
-        specs.append(NodeSpec("so101_rerun", [str(node_binary("so101_rerun")), "live", *sink_args, *ns],
-                              ready="subscriber /task/reward"))
+        specs.append(
+            NodeSpec("so101_rerun", [str(node_binary("so101_rerun")), "live", *sink_args, *ns], ready="subscriber /task/reward")
+        )
 
     if args.record:
         recorder = [str(node_binary("recorder_node")), "--output", args.bags, "--task", args.task, *ns]
@@ -144,8 +154,9 @@ def plan(args) -> list[NodeSpec]:
         else:
             teleop += ["--source", args.teleop_source, "--mode", args.mode]
         teleop += shlex.split(args.teleop_args)
-        specs.append(NodeSpec("teleop_node", teleop, terminal=args.control == "teleop" and args.teleop_source == "keyboard",
-                              ends_run=True))
+        specs.append(
+            NodeSpec("teleop_node", teleop, terminal=args.control == "teleop" and args.teleop_source == "keyboard", ends_run=True)
+        )
     elif args.control == "policy":
         if not args.policy:
             raise SystemExit("so101-launch: --control policy needs --policy (a checkpoint directory or a Hub id)")
@@ -159,8 +170,10 @@ def lerobot_calibration_file(robot_id: str) -> Path:
     """Where LeRobot (and the driver's --robot-id) keeps a follower arm's calibration:
     $HF_LEROBOT_CALIBRATION, else $HF_LEROBOT_HOME/calibration, else $HF_HOME/lerobot/calibration,
     else ~/.cache/huggingface/lerobot/calibration; then robots/so_follower/ID.json."""
-    env = {name: os.environ.get(name) or None for name in
-           ("HF_LEROBOT_CALIBRATION", "HF_LEROBOT_HOME", "HF_HOME", "XDG_CACHE_HOME", "HOME")}
+    env = {
+        name: os.environ.get(name) or None
+        for name in ("HF_LEROBOT_CALIBRATION", "HF_LEROBOT_HOME", "HF_HOME", "XDG_CACHE_HOME", "HOME")
+    }
     if env["HF_LEROBOT_CALIBRATION"]:
         base = Path(env["HF_LEROBOT_CALIBRATION"])
     elif env["HF_LEROBOT_HOME"]:
@@ -196,8 +209,9 @@ class Launch:
         deadline = time.monotonic() + self.ready_timeout
         while True:
             if entry.process.poll() is not None:
-                raise SystemExit(f"so101-launch: {entry.spec.name} exited with {entry.process.returncode} while starting\n"
-                                 + tail(entry.log))
+                raise SystemExit(
+                    f"so101-launch: {entry.spec.name} exited with {entry.process.returncode} while starting\n" + tail(entry.log)
+                )
             if kind == "path":
                 up = Path(what).exists()
             elif kind in ("publisher", "subscriber"):
@@ -210,8 +224,10 @@ class Launch:
             if up:
                 return
             if time.monotonic() > deadline:
-                raise SystemExit(f"so101-launch: {entry.spec.name} not up within {self.ready_timeout:.0f} s "
-                                 f"({entry.spec.ready})\n" + tail(entry.log))
+                raise SystemExit(
+                    f"so101-launch: {entry.spec.name} not up within {self.ready_timeout:.0f} s "
+                    f"({entry.spec.ready})\n" + tail(entry.log)
+                )
             time.sleep(0.1)
 
     # ------------------------------------------------------------------ processes
@@ -224,9 +240,14 @@ class Launch:
             # only and the nodes stop in order; the keyboard teleop keeps the terminal (raw mode
             # turns Ctrl-C into a key it handles itself).
             stdin = None if spec.terminal else subprocess.PIPE if spec.open_stdin else subprocess.DEVNULL
-            process = subprocess.Popen(
-                [*DIE_WITH_PARENT, *spec.argv], env=node_environment(), stdin=stdin,
-                stdout=None if spec.terminal else out, stderr=out, start_new_session=not spec.terminal)
+            process = processes.start(
+                [*DIE_WITH_PARENT, *spec.argv],
+                env=node_environment(),
+                stdin=stdin,
+                stdout=None if spec.terminal else out,
+                stderr=out,
+                start_new_session=not spec.terminal,
+            )
         entry = Running(spec, process, log)
         self.running.append(entry)
         print(f"so101-launch: started {spec.name} (pid {process.pid}, log {log})", flush=True)
@@ -326,14 +347,17 @@ def parser() -> argparse.ArgumentParser:
     sim = p.add_argument_group("sim")
     sim.add_argument("--lite", action="store_true", help="no meshes (renders ~5x faster on a CPU)")
     sim.add_argument("--speed", default=None, help="sim speed (default: real time; 4 with the expert)")
-    sim.add_argument("--sim-args", default="", help="more so101_sim_node flags in one string (--sim-args=\"--cameras top,wrist\")")
+    sim.add_argument("--sim-args", default="", help='more so101_sim_node flags in one string (--sim-args="--cameras top,wrist")')
     real = p.add_argument_group("real")
     real.add_argument("--port", default=None, help="the arm's servo bus, e.g. /dev/ttyACM0")
     real.add_argument("--robot-id", default=None, help="the arm's LeRobot calibration id")
     real.add_argument("--calibration", default=None, help="a LeRobot calibration file instead of --robot-id's")
-    real.add_argument("--emulate", action="store_true",
-                      help="run so101_servo_emulator as the arm (no hardware): the arm of --calibration or "
-                           "--robot-id's file, else the project's assets/emulated_arm/so101_calibration.json")
+    real.add_argument(
+        "--emulate",
+        action="store_true",
+        help="run so101_servo_emulator as the arm (no hardware): the arm of --calibration or "
+        "--robot-id's file, else the project's assets/emulated_arm/so101_calibration.json",
+    )
     real.add_argument("--leader-port", default=None, help="the leader arm's bus (--teleop-source leader)")
     real.add_argument("--leader-id", default=None, help="the leader arm's calibration id")
     real.add_argument("--driver-args", default="", help="more so101_feetech_driver flags")
@@ -343,11 +367,15 @@ def parser() -> argparse.ArgumentParser:
     control.add_argument("--episodes", type=int, default=0, help="expert: stop after N episodes (0: until Ctrl-C)")
     control.add_argument("--teleop-args", default="", help="more teleop_node flags")
     control.add_argument("--policy", default=None, help="policy checkpoint directory or Hub id (--control policy)")
-    control.add_argument("--policy-args", default="", help="more so101-run-policy flags, e.g. \"--duration 60\"")
+    control.add_argument("--policy-args", default="", help='more so101-run-policy flags, e.g. "--duration 60"')
     viz = p.add_argument_group("visualization")
     viz.add_argument("--tf", action="store_true", help="publish /robot_description and /tf (so101_state_publisher)")
-    viz.add_argument("--rerun", default=None, metavar="SINK",
-                     help="show the run in Rerun: spawn (a viewer), connect[=URL] (a running one) or FILE.rrd")
+    viz.add_argument(
+        "--rerun",
+        default=None,
+        metavar="SINK",
+        help="show the run in Rerun: spawn (a viewer), connect[=URL] (a running one) or FILE.rrd",
+    )
     record = p.add_argument_group("recording")
     record.add_argument("--bags", default="bags", help="directory of the episode bags")
     record.add_argument("--recorder-args", default="", help="more recorder_node flags")
@@ -358,11 +386,14 @@ def main(argv: list[str] | None = None) -> int:
     argv = sys.argv[1:] if argv is None else argv
     args = parser().parse_args(argv)
     if args.rerun and args.rerun.startswith("connect") and not args.host_network:
-        raise SystemExit("so101-launch: --rerun connect reaches a viewer on this network namespace's loopback, not the "
-                         "host's: use --rerun spawn or --rerun FILE.rrd, or --host-network")
+        raise SystemExit(
+            "so101-launch: --rerun connect reaches a viewer on this network namespace's loopback, not the "
+            "host's: use --rerun spawn or --rerun FILE.rrd, or --host-network"
+        )
     if not args.host_network and network_namespace_problem():
         # Re-run inside a private network namespace; every node inherits it.
-        os.execv(str(ISOLATED), [str(ISOLATED), sys.executable, "-m", "so101_lerobot.launch", *argv])
+        isolated = str(isolated_wrapper())
+        os.execv(isolated, [isolated, sys.executable, "-m", "so101.launch", *argv])
     if args.speed is None and args.robot == "sim" and args.control == "expert":
         args.speed = "4"  # every camera frame rendered; as fast as the renderer allows, up to 4x
     args.log_dir = args.log_dir or f"logs/launch-{time.strftime('%Y%m%d-%H%M%S')}"

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import time
-from typing import Callable
+from collections.abc import Callable
 
 
 def spin_until(node, predicate: Callable[[], bool], timeout: float) -> bool:

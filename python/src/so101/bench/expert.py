@@ -7,6 +7,7 @@ demonstrations.
 Must run inside one private network namespace (scripts/bench.sh does that). Prints a Markdown
 report on stdout and writes the raw numbers as JSON to --json.
 """
+
 from __future__ import annotations
 
 import argparse
@@ -17,15 +18,16 @@ import tempfile
 import time
 from pathlib import Path
 
-import bench_common
+from so101.bench import common as bench_common
 
 
 def node_env() -> dict:
     return bench_common.node_env("info", keep_callers_level=True)
 
 
-def run_expert(bin_dir: Path, episodes: int, speed: float, sim_seed: int, expert_seed: int, noise: tuple[float, float],
-               lite: bool) -> dict:
+def run_expert(
+    bin_dir: Path, episodes: int, speed: float, sim_seed: int, expert_seed: int, noise: tuple[float, float], lite: bool
+) -> dict:
     with tempfile.TemporaryDirectory() as work:
         report = Path(work) / "report.json"
         sim_args = [str(bin_dir / "so101_sim_node"), "--cameras", "none", "--speed", str(speed), "--seed", str(sim_seed)]
@@ -35,10 +37,26 @@ def run_expert(bin_dir: Path, episodes: int, speed: float, sim_seed: int, expert
         started = time.monotonic()
         try:
             expert = subprocess.run(
-                [str(bin_dir / "teleop_node"), "--source", "expert", "--sim-time", "--episodes", str(episodes),
-                 "--seed", str(expert_seed), "--waypoint-noise", str(noise[0]), "--action-noise", str(noise[1]),
-                 "--report", str(report)],
-                env=node_env(), stderr=subprocess.PIPE, text=True, timeout=episodes * 12 / speed + 120,
+                [
+                    str(bin_dir / "teleop_node"),
+                    "--source",
+                    "expert",
+                    "--sim-time",
+                    "--episodes",
+                    str(episodes),
+                    "--seed",
+                    str(expert_seed),
+                    "--waypoint-noise",
+                    str(noise[0]),
+                    "--action-noise",
+                    str(noise[1]),
+                    "--report",
+                    str(report),
+                ],
+                env=node_env(),
+                stderr=subprocess.PIPE,
+                text=True,
+                timeout=episodes * 12 / speed + 120,
             )
         finally:
             sim.terminate()
@@ -64,19 +82,25 @@ def main() -> int:
         "waypoint noise 3 mm, action noise 0.005 rad": (0.003, 0.005),
         "waypoint noise 5 mm, action noise 0.01 rad": (0.005, 0.01),
     }
-    runs = {label: run_expert(args.bin_dir, args.episodes, args.speed, args.seed, 1, noise, lite=False)
-            for label, noise in noises.items()}
+    runs = {
+        label: run_expert(args.bin_dir, args.episodes, args.speed, args.seed, 1, noise, lite=False)
+        for label, noise in noises.items()
+    }
     lines = [
-        f"| expert | episodes | successes | success rate | wall time |",
+        "| expert | episodes | successes | success rate | wall time |",
         "|---|---|---|---|---|",
     ]
     for label, result in runs.items():
-        lines.append(f"| {label} | {result['episodes']} | {result['successes']} | **{100 * result['success_rate']:.0f} %** "
-                     f"| {result['wall_seconds']:.0f} s |")
+        lines.append(
+            f"| {label} | {result['episodes']} | {result['successes']} | **{100 * result['success_rate']:.0f} %** "
+            f"| {result['wall_seconds']:.0f} s |"
+        )
         failures = [r for r in result["results"] if not r["success"]]
         for failure in failures:
-            lines.append(f"|  failed: episode {failure['episode']} | cube x={failure['cube'][0]:.3f} y={failure['cube'][1]:.3f} "
-                         f"yaw={failure['cube'][3]:.2f} | {failure['note']} | | |")
+            lines.append(
+                f"|  failed: episode {failure['episode']} | cube x={failure['cube'][0]:.3f} y={failure['cube'][1]:.3f} "
+                f"yaw={failure['cube'][3]:.2f} | {failure['note']} | | |"
+            )
         print(f"{label}: {result['successes']}/{result['episodes']}", file=sys.stderr)
     return bench_common.report(lines, runs, args.json)
 

@@ -14,18 +14,19 @@ camera gets, frames skipped, and whether the physics kept real time.
 Must run inside one private network namespace (scripts/bench.sh does that). Prints a Markdown
 report on stdout and writes the raw numbers as JSON to --json.
 """
+
 from __future__ import annotations
 
 import argparse
 import json
 import re
-import signal
 import statistics
 import subprocess
 import sys
 from pathlib import Path
 
-import bench_common
+from so101 import process
+from so101.bench import common as bench_common
 
 # (label, lite, cameras, size)
 CONFIGS = [
@@ -56,13 +57,13 @@ def run_node(bin_dir: Path, args: list[str], seconds: float, with_subscriber: bo
     subscriber = None
     if with_subscriber:
         subscriber = subprocess.Popen([sys.executable, "-c", SUBSCRIBER], stdout=subprocess.PIPE, text=True)
-    node = subprocess.Popen([str(bin_dir / "so101_sim_node"), *args, "--duration", str(seconds)],
-                            env=node_env(), stderr=subprocess.PIPE, text=True)
+    node = subprocess.Popen(
+        [str(bin_dir / "so101_sim_node"), *args, "--duration", str(seconds)], env=node_env(), stderr=subprocess.PIPE, text=True
+    )
     _, err = node.communicate(timeout=seconds + 120)
     received = None
     if subscriber is not None:
-        subscriber.send_signal(signal.SIGINT)
-        received = int(subscriber.communicate(timeout=30)[0].strip() or 0)
+        received = int(process.interrupt_and_collect(subscriber)[0].strip() or 0)
     if node.returncode != 0:
         raise RuntimeError(f"so101_sim_node {' '.join(args)} exited with {node.returncode}:\n{err[-3000:]}")
     shutdown = re.search(r"shutting down .*sim_seconds_run=([0-9.]+) wall_seconds=([0-9.]+) physics_steps=([0-9]+)", err)
@@ -107,8 +108,9 @@ def main() -> int:
             bare = bare_ms_per_frame(args.bin_dir, lite, cameras, size, args.frames)
             node = node_max_speed(args.bin_dir, lite, cameras, size, args.seconds)
             runs.append({"bare_ms_per_frame": bare, "node": node})
-            print(f"{label} run {repeat + 1}: bare {bare:.2f} ms/frame, node {node['ms_per_frame']:.2f} ms/frame",
-                  file=sys.stderr)
+            print(
+                f"{label} run {repeat + 1}: bare {bare:.2f} ms/frame, node {node['ms_per_frame']:.2f} ms/frame", file=sys.stderr
+            )
         results["configs"][label] = runs
 
     # End to end: the same pipeline with an rclpy process receiving every top frame.
@@ -116,14 +118,17 @@ def main() -> int:
         bare = bare_ms_per_frame(args.bin_dir, False, "top", "640x480", args.frames)
         node = node_max_speed(args.bin_dir, False, "top", "640x480", args.seconds, with_subscriber=True)
         results["rclpy_subscriber"].append({"bare_ms_per_frame": bare, "node": node})
-        print(f"with rclpy subscriber run {repeat + 1}: bare {bare:.2f}, node {node['ms_per_frame']:.2f} ms/frame, "
-              f"received {node['received_by_rclpy']} of {node['frames']}", file=sys.stderr)
+        print(
+            f"with rclpy subscriber run {repeat + 1}: bare {bare:.2f}, node {node['ms_per_frame']:.2f} ms/frame, "
+            f"received {node['received_by_rclpy']} of {node['frames']}",
+            file=sys.stderr,
+        )
 
     # Real time with the defaults.
     results["real_time"] = run_node(args.bin_dir, [], args.seconds * 2)
 
     lines = [
-        f"| cameras (scene visuals, cameras, size) | bare loop ms/frame | node ms/frame | ratio bare/node | node frames/s |",
+        "| cameras (scene visuals, cameras, size) | bare loop ms/frame | node ms/frame | ratio bare/node | node frames/s |",
         "|---|---|---|---|---|",
     ]
 
@@ -131,8 +136,10 @@ def main() -> int:
         bare = statistics.median(r["bare_ms_per_frame"] for r in runs)
         node = statistics.median(r["node"]["ms_per_frame"] for r in runs)
         ratios = sorted(r["bare_ms_per_frame"] / r["node"]["ms_per_frame"] for r in runs)
-        return (f"| {label} | {bare:.2f} | {node:.2f} | **{bare / node:.2f}** (runs {', '.join(f'{x:.2f}' for x in ratios)})"
-                f" | {1e3 / node:.1f} |")
+        return (
+            f"| {label} | {bare:.2f} | {node:.2f} | **{bare / node:.2f}** (runs {', '.join(f'{x:.2f}' for x in ratios)})"
+            f" | {1e3 / node:.1f} |"
+        )
 
     for label, runs in results["configs"].items():
         lines.append(row(label, runs))
@@ -146,8 +153,10 @@ def main() -> int:
         "",
         f"Real time, default cameras (3 x 640x480 @ 30 Hz, meshes), {rt['wall_seconds']:.1f} s: "
         f"sim time / wall time {rt['sim_seconds'] / rt['wall_seconds']:.3f}; "
-        + "; ".join(f"{name} {c['rendered'] / rt['wall_seconds']:.1f} frames/s ({c['skipped']} skipped)"
-                    for name, c in rt["cameras"].items()),
+        + "; ".join(
+            f"{name} {c['rendered'] / rt['wall_seconds']:.1f} frames/s ({c['skipped']} skipped)"
+            for name, c in rt["cameras"].items()
+        ),
     ]
     return bench_common.report(lines, results, args.json)
 

@@ -1,4 +1,4 @@
-"""Decoding the stack's messages in so101_lerobot (shared by the bag reader and the rclpy tools):
+"""Decoding the stack's messages in so101 (shared by the bag reader and the rclpy tools):
 images of both RGB byte orders with padded rows, joint states in any order, unit round trips."""
 
 from __future__ import annotations
@@ -7,8 +7,8 @@ import numpy as np
 import pytest
 from sensor_msgs.msg import Image, JointState
 
-from so101_lerobot.messages import joint_positions, rgb_image
-from so101_lerobot.units import JOINT_LIMITS, JOINT_NAMES, lerobot_from_radians, radians_from_lerobot
+from so101.messages import joint_positions, rgb_image
+from so101.units import JOINT_LIMITS, JOINT_NAMES, lerobot_from_radians, radians_from_lerobot
 
 
 def image(encoding: str, pixels: np.ndarray, pad: int = 0) -> Image:

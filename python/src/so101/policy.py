@@ -61,7 +61,8 @@ class StackPolicy:
             self.policy = get_policy_class(config.type).from_pretrained(source, config=config)
             overrides = {"device_processor": {"device": self.device}}
             self.preprocessor, self.postprocessor = make_pre_post_processors(
-                config, pretrained_path=source, preprocessor_overrides=overrides)
+                config, pretrained_path=source, preprocessor_overrides=overrides
+            )
         except Exception as error:  # noqa: BLE001 - missing weights or processors, a bad file
             raise PolicyError(f"cannot load the {config.type} policy of {source!r} ({type(error).__name__}: {error})") from error
         self.policy.eval()
@@ -77,14 +78,18 @@ class StackPolicy:
         if unnamed := [key for key in visual if not key.startswith(IMAGE_PREFIX)]:
             raise PolicyError(f"the policy's images {unnamed} are not observation.images.<camera>")
         self.cameras = [
-            CameraInput(key.removeprefix(IMAGE_PREFIX), int(inputs[key].shape[1]), int(inputs[key].shape[2]))
-            for key in visual
+            CameraInput(key.removeprefix(IMAGE_PREFIX), int(inputs[key].shape[1]), int(inputs[key].shape[2])) for key in visual
         ]
         others = [key for key, feature in inputs.items() if key != STATE and feature.type is not FeatureType.VISUAL]
         if others:
             raise PolicyError(f"the policy needs inputs the stack does not provide: {others}")
-        log.info("policy %s (%s) on %s, cameras %s", source, config.type, self.device,
-                 ", ".join(f"{c.name} {c.width}x{c.height}" for c in self.cameras) or "none")
+        log.info(
+            "policy %s (%s) on %s, cameras %s",
+            source,
+            config.type,
+            self.device,
+            ", ".join(f"{c.name} {c.width}x{c.height}" for c in self.cameras) or "none",
+        )
 
     def reset(self) -> None:
         """Before each episode: clears the policy's action queue and observation history."""
@@ -109,8 +114,16 @@ class StackPolicy:
         import torch
         from lerobot.common.control_utils import predict_action
 
-        action = predict_action(observation, self.policy, torch.device(self.device), self.preprocessor,
-                                self.postprocessor, use_amp=False, task=self.task, robot_type="so_follower")
+        action = predict_action(
+            observation,
+            self.policy,
+            torch.device(self.device),
+            self.preprocessor,
+            self.postprocessor,
+            use_amp=False,
+            task=self.task,
+            robot_type="so_follower",
+        )
         values = action.squeeze(0).to("cpu").numpy().astype(np.float64)
         if values.shape != (6,) or not np.all(np.isfinite(values)):
             raise PolicyError(f"the policy answered {values}, not six finite joint targets")

@@ -9,7 +9,7 @@ Reports (docs/benchmarks.md):
   * CPU use of the driver process in both modes.
 
 The driver opens a DDS participant, so run this inside a private network namespace
-(scripts/bench.sh does): scripts/isolated .venv/bin/python scripts/bench_driver.py --bin-dir DIR
+(scripts/bench.sh does): scripts/isolated .venv/bin/python -m so101.bench.driver --bin-dir DIR
 """
 
 from __future__ import annotations
@@ -22,8 +22,9 @@ import statistics
 import subprocess
 import sys
 import tempfile
-import time
 from pathlib import Path
+
+from so101.contract import JOINT_NAMES
 
 BITS_PER_BYTE = 10
 SYNC_READ_REQUEST = 8 + 6  # FF FF FE LEN 82 ADDR SIZE CHK + 6 ids
@@ -34,7 +35,7 @@ SYNC_WRITE_BYTES = 8 + 6 * (1 + POSITION_BYTES)
 
 CALIBRATION = {
     name: {"id": i + 1, "drive_mode": 0, "homing_offset": 0, "range_min": 1000, "range_max": 3000}
-    for i, name in enumerate(["shoulder_pan", "shoulder_lift", "elbow_flex", "wrist_flex", "wrist_roll", "gripper"])
+    for i, name in enumerate(JOINT_NAMES)
 }
 
 
@@ -61,9 +62,21 @@ def run_once(bin_dir: Path, workdir: Path, baud: int, rate: str, telemetry_rate:
     stats.unlink(missing_ok=True)
     emulator = subprocess.Popen(
         # The emulated servos hold the calibration the driver is given (the driver refuses others).
-        [str(bin_dir / "so101_servo_emulator"), "--link", str(link), "--timing", timing, "--baud", str(baud),
-         "--calibration", str(calibration)],
-        stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True,
+        [
+            str(bin_dir / "so101_servo_emulator"),
+            "--link",
+            str(link),
+            "--timing",
+            timing,
+            "--baud",
+            str(baud),
+            "--calibration",
+            str(calibration),
+        ],
+        stdin=subprocess.PIPE,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.DEVNULL,
+        text=True,
     )
     try:
         if not emulator.stdout.readline().startswith("PTY "):
@@ -72,11 +85,26 @@ def run_once(bin_dir: Path, workdir: Path, baud: int, rate: str, telemetry_rate:
         env["RUST_LOG"] = "warn"
         driver = subprocess.run(
             [
-                str(bin_dir / "so101_feetech_driver"), "--port", str(link), "--baud", str(baud),
-                "--calibration", str(calibration), "--rate", rate, "--telemetry-rate", str(telemetry_rate),
-                "--duration", str(seconds), "--stats-json", str(stats),
+                str(bin_dir / "so101_feetech_driver"),
+                "--port",
+                str(link),
+                "--baud",
+                str(baud),
+                "--calibration",
+                str(calibration),
+                "--rate",
+                rate,
+                "--telemetry-rate",
+                str(telemetry_rate),
+                "--duration",
+                str(seconds),
+                "--stats-json",
+                str(stats),
             ],
-            env=env, capture_output=True, text=True, timeout=seconds + 60,
+            env=env,
+            capture_output=True,
+            text=True,
+            timeout=seconds + 60,
         )
         if driver.returncode != 0:
             raise RuntimeError(f"driver failed ({driver.returncode}):\n{driver.stderr[-3000:]}")
@@ -112,24 +140,26 @@ def main() -> int:
                 runs.append(run_once(args.bin_dir, Path(tmp), args.baud, rate, telemetry, args.seconds, timing))
             limit = wire_limit(args.baud, telemetry) if timing == "realistic" else None
             rates = [run["cycles"]["cycles_per_second"] for run in runs]
-            results.append({
-                "label": label,
-                "rate": rate,
-                "telemetry_rate": telemetry,
-                "timing": timing,
-                "wire_limit_cycles_per_second": limit,
-                "cycles_per_second": statistics.median(rates),
-                "ratio_to_wire_limit": statistics.median(rates) / limit if limit else None,
-                "lateness_p50_us": statistics.median(r["cycles"]["lateness_p50_us"] for r in runs),
-                "lateness_p99_us": statistics.median(r["cycles"]["lateness_p99_us"] for r in runs),
-                "lateness_max_us": max(r["cycles"]["lateness_max_us"] for r in runs),
-                "period_p50_us": statistics.median(r["cycles"]["period_p50_us"] for r in runs),
-                "period_p99_us": statistics.median(r["cycles"]["period_p99_us"] for r in runs),
-                "cpu_percent": statistics.median(r["cpu_percent"] for r in runs),
-                "timeouts": sum(r["bus"]["timeouts"] for r in runs),
-                "failed_cycles": sum(r["failed_cycles"] for r in runs),
-                "runs": runs,
-            })
+            results.append(
+                {
+                    "label": label,
+                    "rate": rate,
+                    "telemetry_rate": telemetry,
+                    "timing": timing,
+                    "wire_limit_cycles_per_second": limit,
+                    "cycles_per_second": statistics.median(rates),
+                    "ratio_to_wire_limit": statistics.median(rates) / limit if limit else None,
+                    "lateness_p50_us": statistics.median(r["cycles"]["lateness_p50_us"] for r in runs),
+                    "lateness_p99_us": statistics.median(r["cycles"]["lateness_p99_us"] for r in runs),
+                    "lateness_max_us": max(r["cycles"]["lateness_max_us"] for r in runs),
+                    "period_p50_us": statistics.median(r["cycles"]["period_p50_us"] for r in runs),
+                    "period_p99_us": statistics.median(r["cycles"]["period_p99_us"] for r in runs),
+                    "cpu_percent": statistics.median(r["cpu_percent"] for r in runs),
+                    "timeouts": sum(r["bus"]["timeouts"] for r in runs),
+                    "failed_cycles": sum(r["failed_cycles"] for r in runs),
+                    "runs": runs,
+                }
+            )
 
     print(f"\nWire: {cycle_bytes()} bytes per cycle, {telemetry_bytes()} per telemetry read, {args.baud} baud, 10 bits per byte")
     print("| configuration | cycles/s | wire limit | ratio | lateness p50 / p99 / max (us) | period p50 / p99 (us) | CPU % |")

@@ -9,23 +9,21 @@
 Must run inside one private network namespace (scripts/bench.sh does that). Prints a Markdown
 report on stdout and writes the raw numbers as JSON to --json.
 """
+
 from __future__ import annotations
 
 import argparse
 import json
 import re
-import signal
 import statistics
 import subprocess
 import sys
 import tempfile
-import time
 from pathlib import Path
 
-import bench_common
-
-REPO = Path(__file__).resolve().parent.parent
-SCENE = REPO / "assets" / "so101_cube_to_bin.xml"
+from so101 import process
+from so101.bench import common as bench_common
+from so101.paths import asset
 
 
 def node_env() -> dict:
@@ -33,8 +31,12 @@ def node_env() -> dict:
 
 
 def testspeed_steps_per_second(steps: int) -> float:
-    out = subprocess.run(["mujoco-testspeed", str(SCENE), str(steps), "1", "0"],
-                         check=True, capture_output=True, text=True).stdout
+    out = subprocess.run(
+        ["mujoco-testspeed", str(asset("so101_cube_to_bin.xml")), str(steps), "1", "0"],
+        check=True,
+        capture_output=True,
+        text=True,
+    ).stdout
     match = re.search(r"Steps per second\s*:\s*([0-9.]+)", out)
     if not match:
         raise RuntimeError(f"unexpected mujoco-testspeed output:\n{out}")
@@ -42,16 +44,19 @@ def testspeed_steps_per_second(steps: int) -> float:
 
 
 def node_steps_per_second(bin_dir: Path, seconds: float, with_subscriber: bool) -> float:
-    node = subprocess.Popen([str(bin_dir / "so101_sim_node"), "--cameras", "none", "--speed", "max", "--duration", str(seconds)],
-                            env=node_env(), stderr=subprocess.PIPE, text=True)
+    node = subprocess.Popen(
+        [str(bin_dir / "so101_sim_node"), "--cameras", "none", "--speed", "max", "--duration", str(seconds)],
+        env=node_env(),
+        stderr=subprocess.PIPE,
+        text=True,
+    )
     subscriber = None
     if with_subscriber:
         subscriber = subprocess.Popen([sys.executable, "-c", SUBSCRIBER], stdout=subprocess.PIPE, text=True)
     _, err = node.communicate(timeout=seconds + 60)
     received = None
     if subscriber is not None:
-        subscriber.send_signal(signal.SIGINT)
-        received = subscriber.communicate(timeout=20)[0].strip()
+        received = process.interrupt_and_collect(subscriber, timeout=20)[0].strip()
     if node.returncode != 0:
         raise RuntimeError(f"so101_sim_node exited with {node.returncode}:\n{err}")
     match = re.search(r"steps_per_second=([0-9.]+)", err)
@@ -66,19 +71,13 @@ SUBSCRIBER = bench_common.counting_subscriber("sensor_msgs", "JointState", "/joi
 
 
 def start_node(bin_dir: Path, rate: float) -> subprocess.Popen:
-    log = tempfile.TemporaryFile(mode="w+")
-    node = subprocess.Popen([str(bin_dir / "so101_sim_node"), "--lite", "--cameras", "none", "--rate", str(rate)],
-                            env=node_env(), stderr=log)
-    time.sleep(1.0)  # the node is up and announcing before the client starts
-    if node.poll() is not None:
-        log.seek(0)
-        raise RuntimeError(f"so101_sim_node --rate {rate} exited with {node.returncode}:\n{log.read()[-3000:]}")
-    return node
-
-
-def stop(process: subprocess.Popen) -> None:
-    process.send_signal(signal.SIGINT)
-    process.wait(timeout=20)
+    # One second for the node to be up and announcing before the client starts.
+    return process.start_and_check(
+        [bin_dir / "so101_sim_node", "--lite", "--cameras", "none", "--rate", str(rate)],
+        settle=1.0,
+        log=tempfile.TemporaryFile(mode="w+"),
+        env=node_env(),
+    )
 
 
 def run_tool(command: list[str], **kwargs) -> str:
@@ -101,21 +100,21 @@ def rust_reaction(bin_dir: Path, rate: float, samples: int) -> dict:
     try:
         out = run_tool([str(bin_dir / "so101_latency_probe"), "--samples", str(samples)], env=node_env())
     finally:
-        stop(node)
+        process.stop(node, timeout=20)
     return json_line(out)
 
 
 def rclpy_reaction(bin_dir: Path, rate: float, samples: int) -> dict:
     node = start_node(bin_dir, rate)
     try:
-        out = run_tool([sys.executable, str(REPO / "scripts" / "bench_latency.py"), "--samples", str(samples)])
+        out = run_tool([sys.executable, "-m", "so101.bench.latency", "--samples", str(samples)])
     finally:
-        stop(node)
+        process.stop(node, timeout=20)
     return json_line(out)
 
 
 def pingpong(samples: int) -> dict:
-    out = run_tool([sys.executable, str(REPO / "scripts" / "bench_latency.py"), "--pingpong", "--samples", str(samples)])
+    out = run_tool([sys.executable, "-m", "so101.bench.latency", "--pingpong", "--samples", str(samples)])
     return json_line(out)
 
 
@@ -143,8 +142,10 @@ def main() -> int:
         node = node_steps_per_second(args.bin_dir, args.seconds, with_subscriber=False)
         node_sub = node_steps_per_second(args.bin_dir, args.seconds, with_subscriber=True)
         results["speed"].append({"testspeed": anchor, "node": node, "node_with_rclpy_subscriber": node_sub})
-        print(f"speed run {repeat + 1}: testspeed {anchor:.0f}, node {node:.0f}, "
-              f"node + rclpy subscriber {node_sub:.0f} steps/s", file=sys.stderr)
+        print(
+            f"speed run {repeat + 1}: testspeed {anchor:.0f}, node {node:.0f}, node + rclpy subscriber {node_sub:.0f} steps/s",
+            file=sys.stderr,
+        )
 
     results["latency"]["pingpong_rclpy"] = pingpong(args.samples)
     for rate in (100.0, 500.0):
@@ -155,7 +156,7 @@ def main() -> int:
     median = lambda key: statistics.median(run[key] for run in results["speed"]) if results["speed"] else float("nan")  # noqa: E731
     anchor = median("testspeed")
     lines = [
-        "| measurement | steps/s (median of %d) | ratio to mujoco-testspeed |" % args.repeats,
+        f"| measurement | steps/s (median of {args.repeats}) | ratio to mujoco-testspeed |",
         "|---|---|---|",
         f"| mujoco-testspeed, same scene, 1 thread | {anchor:,.0f} | 1.00 |",
         f"| so101_sim_node --speed max, no subscriber | {median('node'):,.0f} | {median('node') / anchor:.2f} |",
@@ -167,10 +168,16 @@ def main() -> int:
     ]
     base = results["latency"]["pingpong_rclpy"]
     lines.append(f"| rclpy <-> rclpy ping-pong round trip (anchor) | {us(base, 'p50'):.0f} | {us(base, 'p99'):.0f} | 1.00 |")
-    for key, label in (("rust_rate100", "Rust client, node at 100 Hz"), ("rclpy_rate100", "rclpy client, node at 100 Hz"),
-                       ("rust_rate500", "Rust client, node at 500 Hz"), ("rclpy_rate500", "rclpy client, node at 500 Hz")):
+    for key, label in (
+        ("rust_rate100", "Rust client, node at 100 Hz"),
+        ("rclpy_rate100", "rclpy client, node at 100 Hz"),
+        ("rust_rate500", "Rust client, node at 500 Hz"),
+        ("rclpy_rate500", "rclpy client, node at 500 Hz"),
+    ):
         result = results["latency"][key]
-        lines.append(f"| {label} | {us(result, 'p50'):.0f} | {us(result, 'p99'):.0f} | {us(result, 'p50') / us(base, 'p50'):.2f} |")
+        lines.append(
+            f"| {label} | {us(result, 'p50'):.0f} | {us(result, 'p99'):.0f} | {us(result, 'p50') / us(base, 'p50'):.2f} |"
+        )
     return bench_common.report(lines, results, args.json)
 
 

@@ -1,0 +1,150 @@
+//! The topic contract's names, relative to a node's namespace (`Names::resolve` makes them
+//! absolute), and the Python module generated from them and from [`crate::robot`]: the facts the
+//! Rust nodes and the Python package share live here once. `so101_contract --python` writes
+//! python/src/so101/contract.py; a test fails when the committed file differs.
+
+use crate::robot::{JOINT_LIMITS, JOINT_NAMES};
+
+/// Topics, relative to the namespace.
+pub mod topics {
+    /// sensor_msgs/JointState, published by the sim and the driver.
+    pub const JOINT_STATES: &str = "joint_states";
+    /// sensor_msgs/JointState, positions by name (partial sets allowed): what the arm obeys.
+    pub const JOINT_COMMANDS: &str = "joint_commands";
+    /// std_msgs/Float64MultiArray, six positions in joint order (ros2_control's forward controller).
+    pub const FORWARD_POSITION_COMMANDS: &str = "forward_position_controller/commands";
+    /// sensor_msgs/JointState of a leader arm (the driver in leader mode).
+    pub const LEADER_JOINT_STATES: &str = "leader/joint_states";
+    /// std_msgs/Float64, the task's reward (sim).
+    pub const TASK_REWARD: &str = "task/reward";
+    /// std_msgs/Bool, whether the task is solved (sim).
+    pub const TASK_SUCCESS: &str = "task/success";
+    /// geometry_msgs/PoseStamped, the cube in the world frame (sim).
+    pub const CUBE_POSE: &str = "cube/pose";
+    /// std_msgs/String, episode events (start, stop, success) from teleop to the recorder.
+    pub const EPISODE_EVENTS: &str = "episode/events";
+    /// diagnostic_msgs/DiagnosticArray.
+    pub const DIAGNOSTICS: &str = "diagnostics";
+    /// rosgraph_msgs/Clock (sim time).
+    pub const CLOCK: &str = "clock";
+    /// Prefix of the camera topics: `camera/<name>/image_raw`, `camera/<name>/camera_info`.
+    pub const CAMERA_PREFIX: &str = "camera";
+    /// sensor_msgs/Image (rgb8) of a camera, under `camera/<name>/`.
+    pub const IMAGE_RAW: &str = "image_raw";
+    /// sensor_msgs/CompressedImage (JPEG) of a camera, under `camera/<name>/`.
+    pub const IMAGE_COMPRESSED: &str = "image_raw/compressed";
+    /// sensor_msgs/CameraInfo of a camera, under `camera/<name>/`.
+    pub const CAMERA_INFO: &str = "camera_info";
+
+    /// `camera/<name>/<leaf>` (leaf: [`IMAGE_RAW`], [`IMAGE_COMPRESSED`], [`CAMERA_INFO`]).
+    pub fn camera(name: &str, leaf: &str) -> String {
+        format!("{CAMERA_PREFIX}/{name}/{leaf}")
+    }
+}
+
+/// Services, relative to the namespace.
+pub mod services {
+    /// std_srvs/Trigger: a new episode (sim).
+    pub const SIM_RESET: &str = "sim/reset";
+    /// std_srvs/Trigger: one control period in lockstep mode (sim).
+    pub const SIM_STEP: &str = "sim/step";
+    /// std_srvs/SetBool: torque on or off (driver).
+    pub const TORQUE_ENABLE: &str = "torque_enable";
+    /// std_srvs/Trigger: the recorder's episode control.
+    pub const RECORDER_START: &str = "recorder/start";
+    pub const RECORDER_STOP: &str = "recorder/stop";
+    pub const RECORDER_DISCARD: &str = "recorder/discard";
+    /// std_srvs/SetBool: marks the current (or last) episode a success or not.
+    pub const RECORDER_MARK_SUCCESS: &str = "recorder/mark_success";
+}
+
+/// The cameras of the simulated scene, in the order the sim starts them.
+pub const CAMERA_NAMES: [&str; 3] = ["top", "front", "wrist"];
+
+/// The Python module `so101.contract` with the same facts (the text of python/src/so101/contract.py).
+pub fn python_module() -> String {
+    let mut out = String::from(
+        "\"\"\"The topic contract's facts, generated from the Rust crate so101_core (contract.rs,\n\
+         robot.rs) by `so101_contract --python`: do not edit; a test fails when they differ.\"\"\"\n\n",
+    );
+    let quoted = |names: &[&str]| {
+        names
+            .iter()
+            .map(|name| format!("\"{name}\""))
+            .collect::<Vec<_>>()
+            .join(", ")
+    };
+    out += &format!("JOINT_NAMES = ({})\n", quoted(&JOINT_NAMES));
+    out += "# (min, max) in rad, in JOINT_NAMES order.\nJOINT_LIMITS = (\n";
+    for limit in JOINT_LIMITS {
+        out += &format!("    ({:?}, {:?}),\n", limit.min, limit.max);
+    }
+    out += ")\n";
+    out += &format!("CAMERA_NAMES = ({})\n\n", quoted(&CAMERA_NAMES));
+    out += "# Topics and services, relative to the namespace.\n";
+    let constants: &[(&str, &str)] = &[
+        ("JOINT_STATES", topics::JOINT_STATES),
+        ("JOINT_COMMANDS", topics::JOINT_COMMANDS),
+        (
+            "FORWARD_POSITION_COMMANDS",
+            topics::FORWARD_POSITION_COMMANDS,
+        ),
+        ("LEADER_JOINT_STATES", topics::LEADER_JOINT_STATES),
+        ("TASK_REWARD", topics::TASK_REWARD),
+        ("TASK_SUCCESS", topics::TASK_SUCCESS),
+        ("CUBE_POSE", topics::CUBE_POSE),
+        ("EPISODE_EVENTS", topics::EPISODE_EVENTS),
+        ("DIAGNOSTICS", topics::DIAGNOSTICS),
+        ("CLOCK", topics::CLOCK),
+        ("CAMERA_PREFIX", topics::CAMERA_PREFIX),
+        ("IMAGE_RAW", topics::IMAGE_RAW),
+        ("IMAGE_COMPRESSED", topics::IMAGE_COMPRESSED),
+        ("CAMERA_INFO", topics::CAMERA_INFO),
+        ("SIM_RESET", services::SIM_RESET),
+        ("SIM_STEP", services::SIM_STEP),
+        ("TORQUE_ENABLE", services::TORQUE_ENABLE),
+        ("RECORDER_START", services::RECORDER_START),
+        ("RECORDER_STOP", services::RECORDER_STOP),
+        ("RECORDER_DISCARD", services::RECORDER_DISCARD),
+        ("RECORDER_MARK_SUCCESS", services::RECORDER_MARK_SUCCESS),
+    ];
+    for (name, value) in constants {
+        out += &format!("{name} = \"{value}\"\n");
+    }
+    out += "\n\ndef camera_topic(name: str, leaf: str = IMAGE_RAW) -> str:\n    \
+            \"\"\"`camera/<name>/<leaf>` (leaf: IMAGE_RAW, IMAGE_COMPRESSED, CAMERA_INFO).\"\"\"\n    \
+            return f\"{CAMERA_PREFIX}/{name}/{leaf}\"\n";
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn camera_topics_are_under_the_prefix() {
+        assert_eq!(
+            topics::camera("top", topics::IMAGE_RAW),
+            "camera/top/image_raw"
+        );
+        assert_eq!(
+            topics::camera("wrist", topics::IMAGE_COMPRESSED),
+            "camera/wrist/image_raw/compressed"
+        );
+    }
+
+    /// The committed Python module is what the generator writes now.
+    #[test]
+    fn python_contract_matches_the_rust_facts() {
+        let path = concat!(
+            env!("CARGO_MANIFEST_DIR"),
+            "/../../python/src/so101/contract.py"
+        );
+        let committed = std::fs::read_to_string(path).unwrap_or_default();
+        assert!(
+            committed == python_module(),
+            "{path} differs from so101_core's contract: regenerate it with \
+             `cargo run -p so101_core --bin so101_contract -- --python > python/src/so101/contract.py`"
+        );
+    }
+}

@@ -1,0 +1,42 @@
+"""The topic contract's facts, generated from the Rust crate so101_core (contract.rs,
+robot.rs) by `so101_contract --python`: do not edit; a test fails when they differ."""
+
+JOINT_NAMES = ("shoulder_pan", "shoulder_lift", "elbow_flex", "wrist_flex", "wrist_roll", "gripper")
+# (min, max) in rad, in JOINT_NAMES order.
+JOINT_LIMITS = (
+    (-1.9199, 1.9199),
+    (-1.7453, 1.7453),
+    (-1.69, 1.69),
+    (-1.6581, 1.6581),
+    (-2.7438, 2.8412),
+    (-0.1745, 1.7453),
+)
+CAMERA_NAMES = ("top", "front", "wrist")
+
+# Topics and services, relative to the namespace.
+JOINT_STATES = "joint_states"
+JOINT_COMMANDS = "joint_commands"
+FORWARD_POSITION_COMMANDS = "forward_position_controller/commands"
+LEADER_JOINT_STATES = "leader/joint_states"
+TASK_REWARD = "task/reward"
+TASK_SUCCESS = "task/success"
+CUBE_POSE = "cube/pose"
+EPISODE_EVENTS = "episode/events"
+DIAGNOSTICS = "diagnostics"
+CLOCK = "clock"
+CAMERA_PREFIX = "camera"
+IMAGE_RAW = "image_raw"
+IMAGE_COMPRESSED = "image_raw/compressed"
+CAMERA_INFO = "camera_info"
+SIM_RESET = "sim/reset"
+SIM_STEP = "sim/step"
+TORQUE_ENABLE = "torque_enable"
+RECORDER_START = "recorder/start"
+RECORDER_STOP = "recorder/stop"
+RECORDER_DISCARD = "recorder/discard"
+RECORDER_MARK_SUCCESS = "recorder/mark_success"
+
+
+def camera_topic(name: str, leaf: str = IMAGE_RAW) -> str:
+    """`camera/<name>/<leaf>` (leaf: IMAGE_RAW, IMAGE_COMPRESSED, CAMERA_INFO)."""
+    return f"{CAMERA_PREFIX}/{name}/{leaf}"
