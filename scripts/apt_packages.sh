@@ -42,7 +42,7 @@ for stem in "${VERSIONED[@]}"; do
 done
 
 if [ ${#missing[@]} -gt 0 ]; then
-    printf 'apt_packages: apt knows no package %s (run apt-get update; see docs/platforms.md)\n' "${missing[@]}" >&2
+    printf 'apt_packages: apt knows none of: %s (run apt-get update; see docs/platforms.md)\n' "${missing[*]}" >&2
     exit 1
 fi
 printf '%s\n' "${chosen[@]}"
