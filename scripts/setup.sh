@@ -1,9 +1,11 @@
 #!/usr/bin/env bash
-# One-time (and idempotent) set-up of everything the stack needs on a Debian 12 machine:
-#   1. Debian packages: MuJoCo 2.2.2 (libmujoco-dev; libmujoco-samples for the mujoco-testspeed
-#      benchmark anchor), libclang for the bindings, a C toolchain, unshare/ip for the private
-#      network namespaces the tests and nodes run in, libudev (gamepads), Mesa's EGL and OSMesa
-#      (headless rendering of the cameras), FFmpeg's libraries (LeRobot decodes videos with them).
+# One-time (and idempotent) set-up of everything the stack needs on Debian 12 or 13 (Ubuntu 24.04
+# by the package names; docs/platforms.md):
+#   1. Debian packages, as scripts/apt_packages.sh names them on this distribution: MuJoCo 2.2.2
+#      (libmujoco-dev; libmujoco-samples for the mujoco-testspeed benchmark anchor), libclang for
+#      the bindings, a C toolchain, unshare/ip for the private network namespaces the tests and
+#      nodes run in, libudev (gamepads), Mesa's EGL and OSMesa (headless rendering of the
+#      cameras), FFmpeg's libraries (LeRobot decodes videos with them).
 #   2. The Python venv .venv (CPython 3.12: Jazzy rclpy wheels, Fast DDS, LeRobot, pytest, the
 #      project's `so101` package in python/): scripts/setup_python.sh.
 #   3. The third-party SO-101 meshes (pinned + checksum): scripts/fetch_assets.sh.
@@ -14,25 +16,38 @@ set -euo pipefail
 . "$(dirname "${BASH_SOURCE[0]}")/common.sh"
 help_if_asked "${BASH_SOURCE[0]}" "$@"
 REPO_ROOT="${SO101_ROOT}"
-APT_PACKAGES=(libmujoco-dev libmujoco-samples libclang-dev gcc libc6-dev iproute2 util-linux python3-venv
-              libudev-dev pkg-config shellcheck
-              libegl1 libegl-mesa0 libgl1-mesa-dri libosmesa6
-              libavutil57 libavcodec59 libavformat59 libavdevice59 libavfilter8 libswscale6 libswresample4)
 MIN_RUST=1.95.0
 
 log() { printf '\033[1msetup:\033[0m %s\n' "$*" >&2; }
 die() { printf 'setup: ERROR: %s\n' "$*" >&2; exit 1; }
 
+sudo_cmd=()
+[ "$(id -u)" = 0 ] || sudo_cmd=(sudo)
+apt_get() { "${sudo_cmd[@]}" env DEBIAN_FRONTEND=noninteractive apt-get "$@"; }
+
+# The package names differ between releases (FFmpeg's carry their soname): apt's cache says which
+# this one has. Without package lists yet (a fresh container), download them first.
+lists_updated=0
+if ! packages="$("${REPO_ROOT}/scripts/apt_packages.sh" 2>/dev/null)"; then
+    log "downloading apt's package lists"
+    apt_get update -q
+    lists_updated=1
+    packages="$("${REPO_ROOT}/scripts/apt_packages.sh")" ||
+        die "apt offers not every package the stack needs (docs/platforms.md lists the supported releases)"
+fi
+mapfile -t APT_PACKAGES <<<"${packages}"
+
+# Installed packages, and the names they provide (libavcodec-extra61 stands in for libavcodec61).
+installed="$(dpkg-query -W -f='${db:Status-Abbrev}|${Package}|${Provides}\n' |
+    awk -F'|' '$1 ~ /^[hi]i/ { print $2; n = split($3, p, ", *"); for (i = 1; i <= n; i++) { sub(/ .*/, "", p[i]); print p[i] } }')"
 missing=()
 for package in "${APT_PACKAGES[@]}"; do
-    dpkg-query -W -f='${Status}' "${package}" 2>/dev/null | grep -q "install ok installed" || missing+=("${package}")
+    grep -qxF -- "${package}" <<<"${installed}" || missing+=("${package}")
 done
 if [ ${#missing[@]} -gt 0 ]; then
     log "installing Debian packages: ${missing[*]}"
-    sudo_cmd=()
-    [ "$(id -u)" = 0 ] || sudo_cmd=(sudo)
-    "${sudo_cmd[@]}" env DEBIAN_FRONTEND=noninteractive apt-get update -q
-    "${sudo_cmd[@]}" env DEBIAN_FRONTEND=noninteractive apt-get install -y -q --no-install-recommends "${missing[@]}"
+    [ "${lists_updated}" = 1 ] || apt_get update -q
+    apt_get install -y -q --no-install-recommends "${missing[@]}"
 else
     log "Debian packages present"
 fi
