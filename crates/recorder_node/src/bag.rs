@@ -7,6 +7,7 @@
 //! error is reported once, the file is closed as far as it can be, and later messages of the
 //! episode are counted as dropped.
 
+use so101_core::episode_bag;
 use std::{
     collections::{BTreeMap, HashMap},
     fs::File,
@@ -201,7 +202,7 @@ impl BagWriter {
         let (index, name, dir) = loop {
             let index = self.next_index;
             self.next_index += 1;
-            let name = format!("{}_{index:06}", self.options.prefix);
+            let name = episode_bag::episode_dir_name(&self.options.prefix, index);
             let dir = self.options.output.join(&name);
             match std::fs::create_dir(&dir) {
                 Ok(()) => break (index, name, dir),
@@ -245,7 +246,7 @@ impl BagWriter {
     }
 
     fn open_file(&self, episode: &Episode) -> Result<OpenFile, BagError> {
-        let relative = format!("{}_{}.mcap", episode.name, episode.files.len());
+        let relative = episode_bag::mcap_file_name(&episode.name, episode.files.len());
         let path = episode.dir.join(&relative);
         let file = File::create(&path).map_err(|source| BagError::Create {
             path: path.clone(),
@@ -630,8 +631,10 @@ fn summary(episode: &Episode, topics: &[TopicInfo]) -> BagSummary {
 }
 
 fn write_metadata_yaml(episode: &Episode, topics: &[TopicInfo]) -> Result<(), BagError> {
-    let path = episode.dir.join("metadata.yaml");
-    let temporary = episode.dir.join("metadata.yaml.tmp");
+    let path = episode.dir.join(episode_bag::METADATA_FILE);
+    let temporary = episode
+        .dir
+        .join(format!("{}.tmp", episode_bag::METADATA_FILE));
     let text = metadata_yaml(&summary(episode, topics));
     std::fs::write(&temporary, text)
         .and_then(|()| std::fs::rename(&temporary, &path))

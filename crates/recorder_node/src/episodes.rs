@@ -6,6 +6,7 @@
 //! `rerecord` (discard and start again).
 
 use serde::Deserialize;
+use so101_core::episode_bag::custom_data;
 
 #[derive(Debug, Clone, PartialEq)]
 pub enum EpisodeEvent {
@@ -89,11 +90,11 @@ impl EpisodeInfo {
             None => "unknown",
         };
         vec![
-            ("episode_index".into(), self.index.to_string()),
-            ("task".into(), self.task.clone()),
-            ("success".into(), success.into()),
+            (custom_data::EPISODE_INDEX.into(), self.index.to_string()),
+            (custom_data::TASK.into(), self.task.clone()),
+            (custom_data::SUCCESS.into(), success.into()),
             (
-                "seed".into(),
+                custom_data::SEED.into(),
                 self.seed.map_or(String::new(), |seed| seed.to_string()),
             ),
             ("start_time_ns".into(), self.start_ns.to_string()),

@@ -1,8 +1,10 @@
 //! The topic contract's names, relative to a node's namespace (`Names::resolve` makes them
-//! absolute), and the Python module generated from them and from [`crate::robot`]: the facts the
+//! absolute), and the Python module generated from them, [`crate::robot`] and
+//! [`crate::episode_bag`]: the facts the
 //! Rust nodes and the Python package share live here once. `so101_contract --python` writes
 //! python/src/so101/contract.py; a test fails when the committed file differs.
 
+use crate::episode_bag;
 use crate::robot::{JOINT_LIMITS, JOINT_NAMES};
 
 /// Topics, relative to the namespace.
@@ -109,6 +111,23 @@ pub fn python_module() -> String {
         ("RECORDER_MARK_SUCCESS", services::RECORDER_MARK_SUCCESS),
     ];
     for (name, value) in constants {
+        out += &format!("{name} = \"{value}\"\n");
+    }
+    out +=
+        "\n# The episode-bag layout (so101_core::episode_bag): directories <prefix>_<index:06>,\n\
+            # rosbag2's metadata file, the keys of its custom_data.\n";
+    let layout: &[(&str, &str)] = &[
+        ("EPISODE_METADATA_FILE", episode_bag::METADATA_FILE),
+        ("EPISODE_DEFAULT_PREFIX", episode_bag::DEFAULT_PREFIX),
+        (
+            "CUSTOM_EPISODE_INDEX",
+            episode_bag::custom_data::EPISODE_INDEX,
+        ),
+        ("CUSTOM_TASK", episode_bag::custom_data::TASK),
+        ("CUSTOM_SUCCESS", episode_bag::custom_data::SUCCESS),
+        ("CUSTOM_SEED", episode_bag::custom_data::SEED),
+    ];
+    for (name, value) in layout {
         out += &format!("{name} = \"{value}\"\n");
     }
     out += "\n\ndef camera_topic(name: str, leaf: str = IMAGE_RAW) -> str:\n    \

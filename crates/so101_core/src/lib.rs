@@ -5,6 +5,7 @@
 pub mod cli_values;
 pub mod command;
 pub mod contract;
+pub mod episode_bag;
 pub mod kinematics;
 pub mod robot;
 pub mod ros;

@@ -140,34 +140,10 @@ fn run_live(args: &LiveArgs, scene: &SceneArgs) -> Result<()> {
     Ok(())
 }
 
-/// Episode directories: the given ones, and the episode_* directories inside the others.
-fn episodes(paths: &[PathBuf]) -> Vec<PathBuf> {
-    let mut found = Vec::new();
-    for path in paths {
-        if bag::mcap_files(path).is_ok() {
-            found.push(path.clone());
-        } else if let Ok(entries) = std::fs::read_dir(path) {
-            let mut inner: Vec<PathBuf> = entries
-                .filter_map(|e| e.ok().map(|e| e.path()))
-                .filter(|p| {
-                    p.is_dir()
-                        && p.file_name()
-                            .is_some_and(|n| n.to_string_lossy().starts_with("episode_"))
-                })
-                .collect();
-            inner.sort();
-            found.extend(inner);
-        } else {
-            found.push(path.clone()); // reported as unreadable below
-        }
-    }
-    found
-}
-
 fn run_bags(args: &BagArgs, scene: &SceneArgs) -> Result<()> {
     std::fs::create_dir_all(&args.output)
         .with_context(|| format!("cannot create {}", args.output.display()))?;
-    let episodes = episodes(&args.bags);
+    let episodes = so101_core::episode_bag::episode_dirs(&args.bags)?;
     if episodes.is_empty() {
         bail!("no episode bags in {:?}", args.bags);
     }

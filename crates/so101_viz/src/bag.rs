@@ -1,5 +1,6 @@
 //! Episode bags (recorder_node's rosbag2 MCAP directories) read back into a [`Bridge`].
 
+use so101_core::episode_bag;
 use std::path::{Path, PathBuf};
 
 use byteorder::{BigEndian, LittleEndian};
@@ -34,17 +35,13 @@ pub struct BagReport {
     pub truncated: Option<String>,
 }
 
-/// The episode's MCAP files in recording order (split bags: name_0, name_1, ..., name_10).
+/// The episode's MCAP files in recording order (so101_core's episode-bag layout); an error when
+/// there are none.
 pub fn mcap_files(episode: &Path) -> Result<Vec<PathBuf>, BagError> {
-    let entries = std::fs::read_dir(episode).map_err(|source| BagError::Read {
-        path: episode.to_owned(),
-        source,
+    let files = episode_bag::mcap_files(episode).map_err(|error| match error {
+        episode_bag::LayoutError::Read { path, source } => BagError::Read { path, source },
+        episode_bag::LayoutError::NotFound(path) => BagError::NoFiles(path),
     })?;
-    let mut files: Vec<PathBuf> = entries
-        .filter_map(|entry| entry.ok().map(|e| e.path()))
-        .filter(|path| path.extension().is_some_and(|ext| ext == "mcap"))
-        .collect();
-    files.sort_by_key(|path| (path.as_os_str().len(), path.clone()));
     if files.is_empty() {
         return Err(BagError::NoFiles(episode.to_owned()));
     }

@@ -1,5 +1,7 @@
 """Reading recorder_node's episode bags: one directory per episode with metadata.yaml and its MCAP
-file(s), read with the `mcap` and `mcap-ros2-support` packages."""
+file(s), read with the `mcap` and `mcap-ros2-support` packages. The layout's rules are
+so101_core::episode_bag's (names and keys from so101.contract; both tested against
+tests/fixtures/episode_bags.txt)."""
 
 from __future__ import annotations
 
@@ -9,6 +11,7 @@ from pathlib import Path
 import numpy as np
 import yaml
 
+from . import contract
 from .messages import joint_positions, rgb_image
 
 
@@ -37,14 +40,37 @@ class Episode:
     cameras: dict[str, Stream]
 
 
+def _split_number(path: Path) -> int | None:
+    _, _, split = path.stem.rpartition("_")
+    return int(split) if split.isdigit() else None
+
+
+def mcap_files(directory: Path) -> list[Path]:
+    """The MCAP files in `directory`, in split order (_0, _1, ..., _10; others after, by name)."""
+    files = [p for p in directory.iterdir() if p.is_file() and p.suffix == ".mcap"]
+    return sorted(files, key=lambda p: (_split_number(p) is None, _split_number(p) or 0, p.name))
+
+
+def is_episode_dir(directory: Path) -> bool:
+    """A metadata.yaml or an MCAP file in it (an episode cut short has no metadata.yaml yet)."""
+    return (directory / contract.EPISODE_METADATA_FILE).is_file() or (directory.is_dir() and bool(mcap_files(directory)))
+
+
+def _has_episode_name(directory: Path) -> bool:
+    prefix, _, index = directory.name.rpartition("_")
+    return bool(prefix) and len(index) >= 6 and index.isdigit()
+
+
 def episode_dirs(paths: list[Path]) -> list[Path]:
-    """Episode directories: the given ones, and the episode_* directories inside given parents."""
+    """The episodes meant by `paths`: each path that is an episode itself, and the episode
+    directories named <prefix>_<index> inside each of the others, in name order; in the order the
+    paths were given. A path that does not exist is a BagError."""
     found: list[Path] = []
     for path in paths:
-        if (path / "metadata.yaml").is_file() or any(path.glob("*.mcap")):
+        if is_episode_dir(path):
             found.append(path)
         elif path.is_dir():
-            found.extend(sorted(p for p in path.iterdir() if p.is_dir() and p.name.startswith("episode_")))
+            found.extend(sorted(p for p in path.iterdir() if p.is_dir() and _has_episode_name(p) and is_episode_dir(p)))
         else:
             raise BagError(f"{path}: neither an episode directory nor a directory of episodes")
     return found
@@ -61,7 +87,7 @@ def read_episode(path: Path, cameras: list[str] | None) -> Episode:
     from mcap.reader import make_reader
     from mcap_ros2.decoder import DecoderFactory
 
-    metadata_file = path / "metadata.yaml"
+    metadata_file = path / contract.EPISODE_METADATA_FILE
     if not metadata_file.is_file():
         raise BagError(f"{path.name}: no metadata.yaml (the recording was cut short); its bag may be truncated")
     try:
@@ -128,12 +154,12 @@ def read_episode(path: Path, cameras: list[str] | None) -> Episode:
         times = [t for t, _ in pairs] if stamped else list(to_sim([t for t, _ in pairs]))
         return Stream(times=times, values=[v for _, v in pairs])
 
-    success_text = str(custom.get("success", "")).lower()
+    success_text = str(custom.get(contract.CUSTOM_SUCCESS, "")).lower()
     return Episode(
         path=path,
-        task=str(custom.get("task") or ""),
+        task=str(custom.get(contract.CUSTOM_TASK) or ""),
         success={"true": True, "false": False}.get(success_text),
-        seed=str(custom.get("seed", "")),
+        seed=str(custom.get(contract.CUSTOM_SEED, "")),
         joint_states=stream([(s, p) for _, s, p in raw_states], stamped=True),
         joint_commands=stream(raw_commands),
         reward=stream(raw_reward),

@@ -36,6 +36,15 @@ RECORDER_STOP = "recorder/stop"
 RECORDER_DISCARD = "recorder/discard"
 RECORDER_MARK_SUCCESS = "recorder/mark_success"
 
+# The episode-bag layout (so101_core::episode_bag): directories <prefix>_<index:06>,
+# rosbag2's metadata file, the keys of its custom_data.
+EPISODE_METADATA_FILE = "metadata.yaml"
+EPISODE_DEFAULT_PREFIX = "episode"
+CUSTOM_EPISODE_INDEX = "episode_index"
+CUSTOM_TASK = "task"
+CUSTOM_SUCCESS = "success"
+CUSTOM_SEED = "seed"
+
 
 def camera_topic(name: str, leaf: str = IMAGE_RAW) -> str:
     """`camera/<name>/<leaf>` (leaf: IMAGE_RAW, IMAGE_COMPRESSED, CAMERA_INFO)."""

@@ -41,6 +41,7 @@ import time
 from dataclasses import dataclass
 from pathlib import Path
 
+from . import contract
 from . import process as processes
 from .isolation import network_namespace_problem
 from .paths import asset, isolated_wrapper, node_binary, node_environment
@@ -301,7 +302,7 @@ def report_closed_episodes(bags: Path, reported: set[Path]) -> None:
     """Prints the episodes newly closed in `bags` (metadata.yaml written), with their verdict."""
     import yaml
 
-    for metadata in sorted(bags.glob("episode_*/metadata.yaml")):
+    for metadata in sorted(bags.glob(f"{contract.EPISODE_DEFAULT_PREFIX}_*/{contract.EPISODE_METADATA_FILE}")):
         if metadata in reported:
             continue
         reported.add(metadata)
@@ -309,7 +310,7 @@ def report_closed_episodes(bags: Path, reported: set[Path]) -> None:
             custom = yaml.safe_load(metadata.read_text())["rosbag2_bagfile_information"].get("custom_data") or {}
         except Exception:  # noqa: BLE001 - a file being written is reported without its verdict
             custom = {}
-        verdict = {"true": "success", "false": "failure"}.get(str(custom.get("success", "")).lower(), "no verdict")
+        verdict = {"true": "success", "false": "failure"}.get(str(custom.get(contract.CUSTOM_SUCCESS, "")).lower(), "no verdict")
         print(f"so101-launch: recorded {metadata.parent.name} ({verdict})", flush=True)
 
 
