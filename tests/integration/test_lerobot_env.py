@@ -70,13 +70,14 @@ def dataset(tmp_path_factory) -> Path:
     assert not problems, problems
     output = tmp / "dataset"
     done = run([VENV_BIN / "so101-bag-to-lerobot", bags, "--output", output, "--repo-id", REPO_ID, "--quiet"], 300, tmp)
-    assert done.returncode == 0 and "2 episode(s) (2 successful)" in done.stdout, done.stdout + done.stderr
+    # The expert may miss a grasp now and then: training takes failed episodes too.
+    assert done.returncode == 0 and "2 episode(s)" in done.stdout, done.stdout + done.stderr
     return output
 
 
 def test_the_datasets_actions_replayed_through_the_env_succeed(dataset):
-    """Observations and actions in the dataset's units: the env starts where episode 0 started
-    (observation.state) and its actions, sent as LeRobot actions, end in info["is_success"]."""
+    """Observations and actions in the dataset's units: the env starts where a successful episode
+    started (observation.state) and its actions, sent as LeRobot actions, end in info["is_success"]."""
     import gymnasium as gym
     from lerobot.datasets.lerobot_dataset import LeRobotDataset
     from lerobot.utils.import_utils import register_third_party_plugins
@@ -86,14 +87,21 @@ def test_the_datasets_actions_replayed_through_the_env_succeed(dataset):
 
     config = EnvConfig.get_choice_class("so101_sim")(cameras={CAMERA[0]: CAMERA[1:]})
     data = LeRobotDataset(REPO_ID, root=dataset)
-    start, stop = data.meta.episodes["dataset_from_index"][0], data.meta.episodes["dataset_to_index"][0]
+    bounds = list(zip(data.meta.episodes["dataset_from_index"], data.meta.episodes["dataset_to_index"]))
+    successful = [k for k, (_start, stop) in enumerate(bounds) if bool(data[stop - 1]["next.success"].item())]
+    assert successful, "the expert succeeded in no episode"
+    episode = successful[0]
+    start, stop = bounds[episode]
     frames = data.hf_dataset.select(range(start, stop))
     states = np.stack([np.asarray(s) for s in frames["observation.state"]])
     actions = np.stack([np.asarray(a) for a in frames["action"]])
 
     env = gym.make(config.gym_id, disable_env_checker=True, **config.gym_kwargs)
     try:
+        # The sim's first reset after its start with SEED placed the cube of episode 0, the next one episode 1's.
         observation, info = env.reset(seed=SEED)
+        for _ in range(episode):
+            observation, info = env.reset()
         assert info["is_success"] is False
         assert observation["pixels"][CAMERA[0]].shape == CAMERA[1:] + (3,)
         assert env.render().shape == CAMERA[1:] + (3,) and env.metadata["render_fps"] == 30
@@ -182,3 +190,9 @@ def test_lerobot_train_evaluates_on_the_env_and_lerobot_eval_runs_its_policy(dat
     # 8 steps of a tiny policy from the home pose cannot put the cube in the bin.
     assert overall["pc_success"] == 0.0 and successes == [False]
     assert overall["video_paths"] and Path(overall["video_paths"][0]).is_file(), overall
+    import av
+
+    with av.open(overall["video_paths"][0]) as container:
+        frames = [frame.to_ndarray(format="rgb24") for frame in container.decode(video=0)]
+    assert len(frames) >= 8 and frames[0].shape == CAMERA[1:] + (3,), (len(frames), frames[0].shape)
+    assert frames[-1].std() > 5, "a blank video"
