@@ -52,7 +52,8 @@ fi
 # The .pth hook written below is part of what a venv must have: bump its version when it changes.
 PTH_VERSION=2
 PACKAGE="${REPO_ROOT}/python/pyproject.toml"
-WANT="requirements=$(sha256_of "${REQUIREMENTS}") package=$(sha256_of "${PACKAGE}") python=${PY_VERSION} pth=${PTH_VERSION}"
+PLUGINS="$(cat "${REPO_ROOT}"/python/plugins/*/pyproject.toml | sha256sum | cut -d" " -f1)"
+WANT="requirements=$(sha256_of "${REQUIREMENTS}") package=$(sha256_of "${PACKAGE}") plugins=${PLUGINS} python=${PY_VERSION} pth=${PTH_VERSION}"
 
 # Fast path: nothing changed since the last successful run.
 if [ -x "${VENV}/bin/python" ] && [ -f "${STAMP}" ] && [ "$(cat "${STAMP}")" = "${WANT}" ]; then
@@ -96,8 +97,12 @@ log "installing ${REQUIREMENTS#"${REPO_ROOT}"/}"
 if "${VENV}/bin/python" -m pip show --quiet so101-lerobot >/dev/null 2>&1; then
     "${VENV}/bin/python" -m pip uninstall --quiet --yes so101-lerobot
 fi
+# With it, LeRobot's plugins (python/plugins: robot type so101_ros, env type so101_sim), each a
+# distribution of its own because LeRobot finds plugins by distribution name.
 "${VENV}/bin/python" -m pip install --quiet --disable-pip-version-check --no-deps --no-build-isolation \
-    --editable "${REPO_ROOT}/python"
+    --editable "${REPO_ROOT}/python" \
+    --editable "${REPO_ROOT}/python/plugins/lerobot_robot_so101_ros" \
+    --editable "${REPO_ROOT}/python/plugins/lerobot_env_so101_sim"
 
 # Every Python process of the venv gets the project's Fast DDS profile (4 MiB socket buffers, so
 # rclpy receives camera images from the Rust nodes), RMW and checkout (SO101_ROOT: where the `so101`

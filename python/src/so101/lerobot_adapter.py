@@ -1,0 +1,101 @@
+"""The Gymnasium env behind LeRobot's env type `so101_sim` (so101.lerobot_env): So101SimEnv (a sim
+node in lockstep over ROS) seen the way LeRobot's envs and the converter's datasets see the robot.
+
+Observation: {"agent_pos": float32[6] joint positions in LeRobot units (degrees, gripper 0-100),
+"environment_state": float32[7] cube position (m) and orientation (w x y z), world frame (when
+asked), "pixels": {camera: uint8[H, W, 3]} (when cameras are asked)}. Action: float32[6] joint
+targets in LeRobot units. info["is_success"]: the sim's /task/success of the step. render(): the
+render camera's frame of the last step (rgb_array), at metadata["render_fps"] = fps.
+"""
+
+from __future__ import annotations
+
+import gymnasium as gym
+import numpy as np
+from gymnasium import spaces
+
+from .units import JOINT_LIMITS, lerobot_from_radians, radians_from_lerobot
+
+ENVIRONMENT_STATE = slice(12, 19)  # of So101SimEnv's state vector: cube position, orientation
+
+
+def observation_from_sim(sim_observation, cameras, environment_state: bool) -> dict:
+    """So101SimEnv's observation (vector, or {"state", "pixels"}) -> LeRobot's env observation."""
+    if isinstance(sim_observation, dict):
+        state, pixels = sim_observation["state"], sim_observation["pixels"]
+    else:
+        state, pixels = sim_observation, {}
+    state = np.asarray(state)
+    observation = {"agent_pos": lerobot_from_radians(state[:6]).astype(np.float32)}
+    if environment_state:
+        observation["environment_state"] = state[ENVIRONMENT_STATE].astype(np.float32)
+    if cameras:
+        observation["pixels"] = {name: pixels[name] for name in cameras}
+    return observation
+
+
+def sim_action_from_lerobot(action) -> np.ndarray:
+    """A LeRobot action (degrees, gripper 0-100) -> So101SimEnv's (radians)."""
+    action = np.asarray(action, dtype=np.float64).reshape(-1)
+    if action.shape != (6,):
+        raise ValueError(f"an so101_sim action is 6 joint targets, not shape {action.shape}")
+    return radians_from_lerobot(action)
+
+
+class So101LeRobotEnv(gym.Env):
+    metadata = {"render_modes": ["rgb_array"], "render_fps": 30}
+
+    def __init__(
+        self,
+        task: str = "cube_to_bin",
+        cameras: dict[str, tuple[int, int]] | None = None,
+        fps: int = 30,
+        environment_state: bool = False,
+        task_description: str = "",
+        lite: bool = True,
+        render_camera: str = "top",
+        render_size: tuple[int, int] = (96, 128),
+        render_mode: str = "rgb_array",
+    ):
+        from .gym_env import So101SimEnv
+
+        self._cameras = {name: tuple(size) for name, size in (cameras or {}).items()}
+        self._environment_state = environment_state
+        self._render_camera = render_camera
+        sim_cameras = dict(self._cameras)
+        sim_cameras.setdefault(render_camera, tuple(render_size))
+        self._sim = So101SimEnv(task=task, control_rate=float(fps), lite=lite, cameras=sim_cameras)
+        self.metadata = {**self.metadata, "render_fps": fps}
+        self.render_mode = render_mode
+        self.task_description = self.task = task_description
+        low, high = lerobot_from_radians(JOINT_LIMITS.T)
+        self.action_space = spaces.Box(low.astype(np.float32), high.astype(np.float32), dtype=np.float32)
+        space = {"agent_pos": spaces.Box(-np.inf, np.inf, shape=(6,), dtype=np.float32)}
+        if environment_state:
+            space["environment_state"] = spaces.Box(-np.inf, np.inf, shape=(7,), dtype=np.float32)
+        if self._cameras:
+            space["pixels"] = spaces.Dict(
+                {name: spaces.Box(0, 255, shape=(h, w, 3), dtype=np.uint8) for name, (h, w) in self._cameras.items()}
+            )
+        self.observation_space = spaces.Dict(space)
+        h, w = sim_cameras[render_camera]
+        self._frame = np.zeros((h, w, 3), dtype=np.uint8)
+
+    def _convert(self, sim_observation) -> dict:
+        self._frame = sim_observation["pixels"][self._render_camera]
+        return observation_from_sim(sim_observation, self._cameras, self._environment_state)
+
+    def reset(self, *, seed: int | None = None, options: dict | None = None):
+        super().reset(seed=seed)
+        sim_observation, info = self._sim.reset(seed=seed)
+        return self._convert(sim_observation), {**info, "is_success": False}
+
+    def step(self, action):
+        sim_observation, reward, terminated, truncated, info = self._sim.step(sim_action_from_lerobot(action))
+        return self._convert(sim_observation), reward, terminated, truncated, {**info, "is_success": bool(info["success"])}
+
+    def render(self) -> np.ndarray:
+        return self._frame
+
+    def close(self) -> None:
+        self._sim.close()

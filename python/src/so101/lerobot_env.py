@@ -1,0 +1,111 @@
+"""LeRobot env type `so101_sim`: the simulated task for lerobot-eval and lerobot-train
+(`--env.type=so101_sim`), registered when LeRobot imports the plugin distribution
+lerobot_env_so101_sim (docs/lerobot.md).
+
+The config builds LeRobot's feature maps (`agent_pos` -> observation.state, `environment_state` ->
+observation.environment_state, `pixels/<camera>` -> observation.images.<camera>) and names the
+Gymnasium ids registered here, whose environment is so101.lerobot_adapter.So101LeRobotEnv. Cheap
+to import (no rclpy): LeRobot imports every plugin at the start of each of its CLIs.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import gymnasium as gym
+from lerobot.configs.types import FeatureType, PolicyFeature
+from lerobot.envs.configs import EnvConfig
+from lerobot.utils.constants import ACTION, OBS_ENV_STATE, OBS_IMAGES, OBS_STATE
+
+from . import contract
+
+PACKAGE = "lerobot_env_so101_sim"
+# task -> (steps of an episode unless --env.episode_length, default task text of the episodes)
+TASKS = {
+    "cube_to_bin": (600, "put the cube in the bin"),
+    "touch_cube": (300, "touch the cube"),
+}
+ENVIRONMENT_STATE_SIZE = 7  # cube position (x y z, m) and orientation (w x y z), world frame
+
+
+def gym_id_of(task: str) -> str:
+    return f"{PACKAGE}/{task}"
+
+
+def register_envs() -> None:
+    for task, (steps, _text) in TASKS.items():
+        if gym_id_of(task) not in gym.registry:
+            gym.register(
+                gym_id_of(task),
+                entry_point="so101.lerobot_adapter:So101LeRobotEnv",
+                kwargs={"task": task},
+                max_episode_steps=steps,
+            )
+
+
+def features_of(cameras: dict[str, tuple[int, int]], environment_state: bool) -> tuple[dict[str, PolicyFeature], dict[str, str]]:
+    """(features, features_map) of the env's observations and action, like LeRobot's own envs."""
+    features = {
+        ACTION: PolicyFeature(type=FeatureType.ACTION, shape=(len(contract.JOINT_NAMES),)),
+        "agent_pos": PolicyFeature(type=FeatureType.STATE, shape=(len(contract.JOINT_NAMES),)),
+    }
+    features_map = {ACTION: ACTION, "agent_pos": OBS_STATE}
+    if environment_state:
+        features["environment_state"] = PolicyFeature(type=FeatureType.ENV, shape=(ENVIRONMENT_STATE_SIZE,))
+        features_map["environment_state"] = OBS_ENV_STATE
+    for name, (height, width) in cameras.items():
+        features[f"pixels/{name}"] = PolicyFeature(type=FeatureType.VISUAL, shape=(height, width, 3))
+        features_map[f"pixels/{name}"] = f"{OBS_IMAGES}.{name}"
+    return features, features_map
+
+
+@EnvConfig.register_subclass("so101_sim")
+@dataclass
+class So101SimEnvConfig(EnvConfig):
+    """`--env.type=so101_sim`. cameras: name -> (height, width), e.g. `--env.cameras='{top: [48, 64]}'`
+    (names and sizes as in the dataset: observation.images.<name>)."""
+
+    task: str | None = "cube_to_bin"
+    fps: int = 30
+    episode_length: int | None = None  # steps; None: 600 (cube_to_bin) or 300 (touch_cube)
+    cameras: dict[str, tuple[int, int]] = field(default_factory=dict)
+    environment_state: bool = False  # add observation.environment_state (cube pose)
+    task_description: str | None = None  # the episodes' task text; None: the task's default
+    lite: bool = True  # the sim's lite rendering
+    render_camera: str = "top"  # the camera of lerobot-eval's videos (render())
+    render_size: tuple[int, int] = (96, 128)  # its (height, width) unless it is one of `cameras`
+
+    def __post_init__(self):
+        if self.task not in TASKS:
+            raise ValueError(f"so101_sim: task {self.task!r}, not one of {', '.join(TASKS)}")
+        for name in [*self.cameras, self.render_camera]:
+            if name not in contract.CAMERA_NAMES:
+                raise ValueError(f"so101_sim: camera {name!r}, not one of {', '.join(contract.CAMERA_NAMES)}")
+        self.cameras = {name: (int(h), int(w)) for name, (h, w) in self.cameras.items()}
+        self.features, self.features_map = features_of(self.cameras, self.environment_state)
+
+    @property
+    def package_name(self) -> str:
+        return PACKAGE
+
+    @property
+    def gym_id(self) -> str:
+        return gym_id_of(self.task)
+
+    @property
+    def gym_kwargs(self) -> dict:
+        kwargs = {
+            "cameras": dict(self.cameras),
+            "fps": self.fps,
+            "environment_state": self.environment_state,
+            "task_description": self.task_description or TASKS[self.task][1],
+            "lite": self.lite,
+            "render_camera": self.render_camera,
+            "render_size": tuple(self.render_size),
+        }
+        if self.episode_length:
+            kwargs["max_episode_steps"] = int(self.episode_length)
+        return kwargs
+
+
+register_envs()
