@@ -3,7 +3,7 @@
 - lerobot-record with LeRobot's so101_leader teleoperator on an emulated leader arm (the servo
   emulator on a pty, calibrated; its shoulder is moved by hand during the recording): 2 episodes
   that LeRobotDataset loads, actions that follow the leader, the sim following them, camera frames;
-- lerobot-replay of episode 0: the sim ends where the episode's actions end;
+- lerobot-replay of episode 1: the sim ends where the episode's actions end;
 - async inference: policy_server + robot_client --robot.type=so101_ros with a tiny ACT trained here
   on that dataset; the client's actions arrive on /joint_commands.
 
@@ -156,8 +156,9 @@ def test_lerobot_record_with_an_emulated_leader_records_the_sim(recording):
         stop = dataset.meta.episodes["dataset_to_index"][index]
         assert abs((stop - start) - FPS * EPISODE_S) <= 3, f"episode {index}: {stop - start} frames"
         episodes.append((start, stop))
-    actions = np.stack([dataset[i]["action"].numpy() for i in range(len(dataset))])
-    states = np.stack([dataset[i]["observation.state"].numpy() for i in range(len(dataset))])
+    columns = dataset.hf_dataset.select_columns(["action", "observation.state"])  # no image decoding
+    actions = np.stack([np.asarray(row) for row in columns["action"]])
+    states = np.stack([np.asarray(row) for row in columns["observation.state"]])
     # The leader rests mid-range (0 degrees, gripper 50) until its shoulder is moved in episode 0.
     (s0, e0), (s1, e1) = episodes
     assert abs(actions[s0, PAN]) < 1.0 and abs(actions[s0, 5] - 50) < 2, actions[s0]
@@ -178,11 +179,12 @@ def test_lerobot_record_with_an_emulated_leader_records_the_sim(recording):
 
 
 def test_lerobot_replay_puts_the_sim_where_the_episode_ends(recording, ros_probe, tmp_path):
+    # Episode 1 ends with the leader's shoulder moved (checked above): a fresh sim starts elsewhere.
     from lerobot.datasets.lerobot_dataset import LeRobotDataset
     from sensor_msgs.msg import JointState
 
     dataset = LeRobotDataset("local/so101_ros_test", root=recording["dataset"])
-    last = dataset[int(dataset.meta.episodes["dataset_to_index"][0]) - 1]["action"].numpy()
+    last = dataset[int(dataset.meta.episodes["dataset_to_index"][1]) - 1]["action"].numpy()
     sim = SimNode(node_binary(), ["--lite", "--cameras", "none", "--namespace", "replay"], tmp_path / "sim.log")
     states = ros_probe.subscribe("/replay/joint_states", JointState, best_effort_qos())
     try:
@@ -197,7 +199,7 @@ def test_lerobot_replay_puts_the_sim_where_the_episode_ends(recording, ros_probe
                 "--robot.id=sim",
                 "--dataset.repo_id=local/so101_ros_test",
                 f"--dataset.root={recording['dataset']}",
-                "--dataset.episode=0",
+                "--dataset.episode=1",
                 "--play_sounds=false",
             ],
             recording["env"],
@@ -311,7 +313,7 @@ def test_async_inference_drives_the_sim_through_so101_ros(recording, tiny_act, r
             print("--- server\n" + log("server") + "\n--- client\n" + log("client"))
             raise
         first = commands.count()
-        time.sleep(2.0)
+        time.sleep(1.0)
         assert commands.count() > first, "the actions stopped"
         msg = commands.latest()
         assert list(msg.name) == list(contract.JOINT_NAMES) and all(math.isfinite(p) for p in msg.position)
@@ -329,3 +331,41 @@ def test_async_inference_drives_the_sim_through_so101_ros(recording, tiny_act, r
         problems = stop_nodes([sim])
     assert not problems, problems
     assert client.returncode in (0, -signal.SIGINT), f"robot_client ended with {client.returncode}"
+
+
+def test_the_robot_drives_the_feetech_driver_alike(arm_factory, tmp_path):
+    """The same Robot, in-process, on so101_feetech_driver (servo emulator behind it): observation
+    = the driver's /joint_states in LeRobot units; a partial action moves the named joints only."""
+    from so101.lerobot_robot import SO101ROS, SO101ROSConfig
+
+    node, _emulator = arm_factory()
+    robot = SO101ROS(SO101ROSConfig(id="arm", calibration_dir=tmp_path / "cal", connect_timeout_s=30.0))
+    robot.connect()
+    try:
+        before = robot.get_observation()
+        assert list(before) == [f"{j}.pos" for j in contract.JOINT_NAMES]
+        sent = robot.send_action({"shoulder_pan.pos": 20.0, "gripper.pos": 30.0})
+        assert sent["shoulder_pan.pos"] == pytest.approx(20.0) and sent["gripper.pos"] == pytest.approx(30.0)
+        assert sent["elbow_flex.pos"] == pytest.approx(before["elbow_flex.pos"])
+
+        def reached() -> bool:
+            robot.send_action({"shoulder_pan.pos": 20.0, "gripper.pos": 30.0})  # the driver's watchdog wants a stream
+            now = robot.get_observation()
+            return abs(now["shoulder_pan.pos"] - 20.0) < 1.5 and abs(now["gripper.pos"] - 30.0) < 2.0
+
+        wait_until(reached, 10.0, "the driver's joints at the action", node)
+        after = robot.get_observation()
+        assert abs(after["elbow_flex.pos"] - before["elbow_flex.pos"]) < 1.5
+    finally:
+        robot.disconnect()
+        robot.disconnect()  # idempotent
+    assert not robot.is_connected
+
+
+def test_connect_names_the_silent_topic(tmp_path):
+    from so101.lerobot_robot import SO101ROS, SO101ROSConfig
+
+    robot = SO101ROS(SO101ROSConfig(namespace="nobody", calibration_dir=tmp_path, connect_timeout_s=1.0))
+    with pytest.raises(TimeoutError, match="/nobody/joint_states"):
+        robot.connect()
+    assert not robot.is_connected

@@ -65,6 +65,8 @@ class SO101ROS(Robot):
 
         from ..messages import joint_positions
 
+        with self._lock:
+            self._state, self._frames, self._goal = None, {}, None
         self._context = rclpy.Context()
         rclpy.init(context=self._context)  # a private context installs no signal handlers
         node = rclpy.create_node(
