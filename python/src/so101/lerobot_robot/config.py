@@ -1,0 +1,44 @@
+"""The configuration of robot type `so101_ros` (registered with LeRobot's RobotConfig here)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+from lerobot.robots import RobotConfig
+
+from .. import contract
+
+
+@dataclass
+class RosCameraConfig:
+    """One camera topic. width/height/fps are declared so the features are known before connect
+    (LeRobot builds the dataset first); frames of another size are refused at connect."""
+
+    topic: str = ""  # default: camera/<name>/image_raw under the namespace
+    width: int = 640
+    height: int = 480
+    fps: int = 30
+
+
+@RobotConfig.register_subclass("so101_ros")
+@dataclass
+class SO101ROSConfig(RobotConfig):
+    # ROS namespace of the stack (e.g. "replay"); relative topic names resolve under it.
+    namespace: str = ""
+    joint_states_topic: str = contract.JOINT_STATES
+    joint_commands_topic: str = contract.JOINT_COMMANDS
+    # {name: RosCameraConfig}; on the CLI: '{top: {width: 64, height: 48, fps: 30}}'.
+    cameras: dict[str, RosCameraConfig] = field(default_factory=dict)
+    # How long connect() waits for the first /joint_states (and a first frame per camera).
+    connect_timeout_s: float = 10.0
+    # LeRobot's max_relative_target: the largest step (LeRobot units) from the present position
+    # one action may ask of a joint; None: no limit.
+    max_relative_target: float | None = None
+    # Name of the rclpy node.
+    node_name: str = "so101_lerobot_robot"
+
+    def __post_init__(self):
+        for name, camera in self.cameras.items():
+            if not camera.topic:
+                camera.topic = contract.camera_topic(name)
+        super().__post_init__()

@@ -1,0 +1,371 @@
+"""LeRobot's own CLIs on the stack through the robot plugin `so101_ros`, against so101_sim_node:
+
+- lerobot-record with LeRobot's so101_leader teleoperator on an emulated leader arm (the servo
+  emulator on a pty, calibrated; its shoulder is moved by hand during the recording): 2 episodes
+  that LeRobotDataset loads, actions that follow the leader, the sim following them, camera frames;
+- lerobot-replay of episode 1: the sim ends where the episode's actions end;
+- async inference: policy_server + robot_client --robot.type=so101_ros with a tiny ACT trained here
+  on that dataset; the client's actions arrive on /joint_commands.
+
+Needs the plugin distribution installed (lerobot_robot_so101_ros) in the test's venv.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import shutil
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+from driver_harness import ServoEmulator
+from harness import REPO_ROOT, Probe, SimNode, best_effort_qos, node_binary, stop_nodes, wait_until
+
+from so101 import contract
+
+BIN = Path(sys.executable).parent
+LEADER_CALIBRATION = REPO_ROOT / "assets" / "emulated_arm" / "so101_calibration.json"
+FPS, EPISODE_S = 15, 3
+CAMERA = "{top: {width: 64, height: 48, fps: 30}}"
+PAN_STEP_TICKS = 400  # the leader's shoulder_pan is moved by this much during episode 0
+PAN_STEP_DEG = PAN_STEP_TICKS * 360 / 4095  # LeRobot's DEGREES: ticks from mid-range * 360 / 4095
+PAN = contract.JOINT_NAMES.index("shoulder_pan")
+
+
+def lerobot_env(root: Path) -> dict[str, str]:
+    env = dict(os.environ)
+    env.update(
+        HF_HOME=str(root / "hf"),
+        HF_LEROBOT_HOME=str(root / "hf" / "lerobot"),
+        HF_LEROBOT_CALIBRATION=str(root / "hf" / "calibration"),
+        HF_HUB_OFFLINE="1",
+    )
+    return env
+
+
+def run(argv: list[str], env: dict, timeout: float, log: Path) -> str:
+    with open(log, "w") as out:
+        done = subprocess.run(argv, env=env, stdout=out, stderr=subprocess.STDOUT, timeout=timeout, cwd=log.parent)
+    text = log.read_text(errors="replace")
+    assert done.returncode == 0, f"{' '.join(argv[:2])} failed ({done.returncode}):\n{text[-6000:]}"
+    return text
+
+
+@pytest.fixture(scope="module")
+def ros_probe():
+    import rclpy
+
+    context = rclpy.Context()
+    rclpy.init(context=context)
+    probe = Probe(context, "so101_robot_plugin_probe")
+    yield probe
+    probe.close()
+    rclpy.try_shutdown(context=context)
+
+
+@pytest.fixture(scope="module")
+def recording(tmp_path_factory, ros_probe):
+    """lerobot-record, 2 episodes from the sim driven by the emulated leader; returns what the
+    test needs to check it."""
+    from sensor_msgs.msg import JointState
+
+    root = tmp_path_factory.mktemp("record")
+    env = lerobot_env(root)
+    calibration = Path(env["HF_LEROBOT_CALIBRATION"]) / "teleoperators" / "so_leader" / "leader.json"
+    calibration.parent.mkdir(parents=True)
+    shutil.copy(LEADER_CALIBRATION, calibration)
+    leader = ServoEmulator(root / "leader_bus", root / "leader.log", "--calibration", str(LEADER_CALIBRATION))
+    sim = SimNode(node_binary(), ["--lite", "--cameras", "top:64x48", "--camera-rate", "30"], root / "sim.log")
+    states = ros_probe.subscribe("/joint_states", JointState, best_effort_qos())
+    commands = ros_probe.subscribe("/joint_commands", JointState, best_effort_qos())
+    dataset = root / "dataset"
+    argv = [
+        str(BIN / "lerobot-record"),
+        "--robot.type=so101_ros",
+        "--robot.id=sim",
+        f"--robot.cameras={CAMERA}",
+        "--teleop.type=so101_leader",
+        f"--teleop.port={leader.link}",
+        "--teleop.id=leader",
+        "--dataset.repo_id=local/so101_ros_test",
+        f"--dataset.root={dataset}",
+        "--dataset.single_task=move the arm",
+        "--dataset.num_episodes=2",
+        f"--dataset.episode_time_s={EPISODE_S}",
+        "--dataset.reset_time_s=0",
+        f"--dataset.fps={FPS}",
+        "--dataset.push_to_hub=false",
+        "--dataset.video=false",
+        "--display_data=false",
+        "--play_sounds=false",
+    ]
+    log = root / "record.log"
+    try:
+        wait_until(lambda: states.count() > 0, 20.0, "the sim's /joint_states", sim)
+        with open(log, "w") as out:
+            record = subprocess.Popen(argv, env=env, stdout=out, stderr=subprocess.STDOUT, cwd=root)
+            try:
+                # The robot commands the sim once LeRobot's loop runs; then the leader is moved.
+                wait_until(lambda: commands.count() > 0 or record.poll() is not None, 60.0, "the first /joint_commands")
+                assert record.poll() is None, log.read_text()[-6000:]
+                time.sleep(0.5)
+                shaft = json.loads(leader.command("dump"))["slots"][PAN]["actual"]
+                leader.command(f"move {PAN + 1} {int(shaft) + PAN_STEP_TICKS}")
+                moved_at = time.monotonic()
+                target = math.radians(PAN_STEP_DEG)
+                wait_until(
+                    lambda: abs(dict(zip(states.latest().name, states.latest().position))["shoulder_pan"] - target) < 0.03,
+                    5.0,
+                    "the sim's shoulder_pan following the leader",
+                    sim,
+                )
+                followed_s = time.monotonic() - moved_at
+                record.wait(timeout=90)
+            finally:
+                if record.poll() is None:
+                    record.kill()
+                    record.wait()
+        text = log.read_text(errors="replace")
+        assert record.returncode == 0, f"lerobot-record failed ({record.returncode}):\n{text[-6000:]}"
+    finally:
+        problems = stop_nodes([sim])
+        leader.stop()
+    assert not problems, problems
+    return {"root": root, "dataset": dataset, "env": env, "followed_s": followed_s, "log": text}
+
+
+def test_lerobot_record_with_an_emulated_leader_records_the_sim(recording):
+    from lerobot.datasets.lerobot_dataset import LeRobotDataset
+
+    dataset = LeRobotDataset("local/so101_ros_test", root=recording["dataset"])
+    assert dataset.num_episodes == 2 and dataset.fps == FPS
+    assert dataset.meta.robot_type == "so101_ros"
+    names = [f"{j}.pos" for j in contract.JOINT_NAMES]
+    assert dataset.features["observation.state"]["names"] == names
+    assert dataset.features["action"]["names"] == names
+    assert dataset.features["observation.images.top"]["shape"] == (48, 64, 3)
+    episodes = []
+    for index in range(2):
+        start = dataset.meta.episodes["dataset_from_index"][index]
+        stop = dataset.meta.episodes["dataset_to_index"][index]
+        assert abs((stop - start) - FPS * EPISODE_S) <= 3, f"episode {index}: {stop - start} frames"
+        episodes.append((start, stop))
+    columns = dataset.hf_dataset.select_columns(["action", "observation.state"])  # no image decoding
+    actions = np.stack([np.asarray(row) for row in columns["action"]])
+    states = np.stack([np.asarray(row) for row in columns["observation.state"]])
+    # The leader rests mid-range (0 degrees, gripper 50) until its shoulder is moved in episode 0.
+    (s0, e0), (s1, e1) = episodes
+    assert abs(actions[s0, PAN]) < 1.0 and abs(actions[s0, 5] - 50) < 2, actions[s0]
+    # One step, from 0 to the moved leader's angle (in episode 0 or at the start of episode 1).
+    pan = actions[:, PAN]
+    at_rest, moved = np.abs(pan) < 1.0, np.abs(pan - PAN_STEP_DEG) < 1.0
+    assert np.all(at_rest | moved), pan
+    assert moved[e1 - 5 : e1].all() and at_rest[s0 : s0 + 3].all(), pan
+    step = int(np.argmax(moved))
+    assert moved[step:].all(), pan
+    assert np.abs(actions[:, [1, 2, 3, 4]]).max() < 1.0
+    # The sim followed: its state ends where the leader was.
+    assert abs(states[e1 - 1, PAN] - PAN_STEP_DEG) < 2.0, states[e1 - 1]
+    assert abs(states[s0, PAN]) < 2.0, states[s0]
+    frame = dataset[s1]["observation.images.top"]
+    assert tuple(frame.shape) == (3, 48, 64) and float(frame.std()) > 0.01, "no camera picture recorded"
+    assert dataset[s1]["task"] == "move the arm"
+
+
+def test_lerobot_replay_puts_the_sim_where_the_episode_ends(recording, ros_probe, tmp_path):
+    # Episode 1 ends with the leader's shoulder moved (checked above): a fresh sim starts elsewhere.
+    from lerobot.datasets.lerobot_dataset import LeRobotDataset
+    from sensor_msgs.msg import JointState
+
+    dataset = LeRobotDataset("local/so101_ros_test", root=recording["dataset"])
+    last = dataset[int(dataset.meta.episodes["dataset_to_index"][1]) - 1]["action"].numpy()
+    sim = SimNode(node_binary(), ["--lite", "--cameras", "none", "--namespace", "replay"], tmp_path / "sim.log")
+    states = ros_probe.subscribe("/replay/joint_states", JointState, best_effort_qos())
+    try:
+        wait_until(lambda: states.count() > 0, 20.0, "the sim's /replay/joint_states", sim)
+        first = np.array([dict(zip(states.latest().name, states.latest().position))[j] for j in contract.JOINT_NAMES])
+        assert abs(first[PAN] - math.radians(last[PAN])) > 0.3, "the sim already sits at the episode's end"
+        run(
+            [
+                str(BIN / "lerobot-replay"),
+                "--robot.type=so101_ros",
+                "--robot.namespace=replay",
+                "--robot.id=sim",
+                "--dataset.repo_id=local/so101_ros_test",
+                f"--dataset.root={recording['dataset']}",
+                "--dataset.episode=1",
+                "--play_sounds=false",
+            ],
+            recording["env"],
+            120,
+            tmp_path / "replay.log",
+        )
+        time.sleep(0.5)
+        msg = states.latest()
+        final = np.array([dict(zip(msg.name, msg.position))[j] for j in contract.JOINT_NAMES])
+    finally:
+        problems = stop_nodes([sim])
+    assert not problems, problems
+    from so101.units import lerobot_from_radians
+
+    reached = lerobot_from_radians(final)
+    assert np.abs(reached[:5] - last[:5]).max() < 2.0, (reached, last)
+
+
+@pytest.fixture(scope="module")
+def tiny_act(recording) -> Path:
+    """A tiny ACT (2 steps) trained by lerobot-train on the recorded dataset."""
+    output = recording["root"] / "train"
+    run(
+        [
+            str(BIN / "lerobot-train"),
+            "--dataset.repo_id=local/so101_ros_test",
+            f"--dataset.root={recording['dataset']}",
+            "--policy.type=act",
+            "--policy.device=cpu",
+            "--policy.push_to_hub=false",
+            "--policy.pretrained_backbone_weights=null",
+            "--policy.use_vae=false",
+            "--policy.dim_model=32",
+            "--policy.n_heads=2",
+            "--policy.dim_feedforward=64",
+            "--policy.n_encoder_layers=1",
+            "--policy.n_decoder_layers=1",
+            "--policy.chunk_size=10",
+            "--policy.n_action_steps=10",
+            "--steps=2",
+            "--batch_size=2",
+            "--num_workers=0",
+            "--save_freq=2",
+            "--log_freq=1",
+            f"--output_dir={output}",
+        ],
+        recording["env"],
+        300,
+        recording["root"] / "train.log",
+    )
+    checkpoint = output / "checkpoints" / "last" / "pretrained_model"
+    assert (checkpoint / "config.json").is_file()
+    return checkpoint
+
+
+def test_async_inference_drives_the_sim_through_so101_ros(recording, tiny_act, ros_probe, tmp_path):
+    from sensor_msgs.msg import JointState
+
+    env = recording["env"]
+    sim = SimNode(
+        node_binary(), ["--lite", "--cameras", "top:64x48", "--camera-rate", "30", "--namespace", "async"], tmp_path / "sim.log"
+    )
+    commands = ros_probe.subscribe("/async/joint_commands", JointState, best_effort_qos())
+    states = ros_probe.subscribe("/async/joint_states", JointState, best_effort_qos())
+    logs = {name: open(tmp_path / f"{name}.log", "w") for name in ("server", "client")}
+    python = str(BIN / "python")
+    server = client = None
+    try:
+        wait_until(lambda: states.count() > 0, 20.0, "the sim's /async/joint_states", sim)
+        server = subprocess.Popen(
+            [python, "-m", "lerobot.async_inference.policy_server", "--host=127.0.0.1", "--port=18765", f"--fps={FPS}"],
+            env=env,
+            stdout=logs["server"],
+            stderr=subprocess.STDOUT,
+        )
+        client = subprocess.Popen(
+            [
+                python,
+                "-m",
+                "lerobot.async_inference.robot_client",
+                "--robot.type=so101_ros",
+                "--robot.namespace=async",
+                "--robot.id=sim",
+                f"--robot.cameras={CAMERA}",
+                "--server_address=127.0.0.1:18765",
+                "--policy_type=act",
+                f"--pretrained_name_or_path={tiny_act}",
+                "--policy_device=cpu",
+                "--actions_per_chunk=10",
+                "--chunk_size_threshold=0.5",
+                f"--fps={FPS}",
+                "--task=move the arm",
+            ],
+            env=env,
+            stdout=logs["client"],
+            stderr=subprocess.STDOUT,
+        )
+
+        def log(name: str) -> str:
+            logs[name].flush()
+            return (tmp_path / f"{name}.log").read_text(errors="replace")[-5000:]
+
+        def arrived() -> bool:
+            assert server.poll() is None, "policy_server died:\n" + log("server")
+            assert client.poll() is None, "robot_client died:\n" + log("client")
+            return commands.count() >= 10
+
+        try:
+            wait_until(arrived, 90.0, "10 actions from robot_client on /async/joint_commands", sim)
+        except BaseException:
+            print("--- server\n" + log("server") + "\n--- client\n" + log("client"))
+            raise
+        first = commands.count()
+        time.sleep(1.0)
+        assert commands.count() > first, "the actions stopped"
+        msg = commands.latest()
+        assert list(msg.name) == list(contract.JOINT_NAMES) and all(math.isfinite(p) for p in msg.position)
+    finally:
+        for proc in (client, server):
+            if proc is not None and proc.poll() is None:
+                proc.send_signal(signal.SIGINT)
+                try:
+                    proc.wait(timeout=15)
+                except subprocess.TimeoutExpired:
+                    proc.kill()
+                    proc.wait()
+        for handle in logs.values():
+            handle.close()
+        problems = stop_nodes([sim])
+    assert not problems, problems
+    assert client.returncode in (0, -signal.SIGINT), f"robot_client ended with {client.returncode}"
+
+
+def test_the_robot_drives_the_feetech_driver_alike(arm_factory, tmp_path):
+    """The same Robot, in-process, on so101_feetech_driver (servo emulator behind it): observation
+    = the driver's /joint_states in LeRobot units; a partial action moves the named joints only."""
+    from so101.lerobot_robot import SO101ROS, SO101ROSConfig
+
+    node, _emulator = arm_factory()
+    robot = SO101ROS(SO101ROSConfig(id="arm", calibration_dir=tmp_path / "cal", connect_timeout_s=30.0))
+    robot.connect()
+    try:
+        before = robot.get_observation()
+        assert list(before) == [f"{j}.pos" for j in contract.JOINT_NAMES]
+        sent = robot.send_action({"shoulder_pan.pos": 20.0, "gripper.pos": 30.0})
+        assert sent["shoulder_pan.pos"] == pytest.approx(20.0) and sent["gripper.pos"] == pytest.approx(30.0)
+        assert sent["elbow_flex.pos"] == pytest.approx(before["elbow_flex.pos"])
+
+        def reached() -> bool:
+            robot.send_action({"shoulder_pan.pos": 20.0, "gripper.pos": 30.0})  # the driver's watchdog wants a stream
+            now = robot.get_observation()
+            return abs(now["shoulder_pan.pos"] - 20.0) < 1.5 and abs(now["gripper.pos"] - 30.0) < 2.0
+
+        wait_until(reached, 10.0, "the driver's joints at the action", node)
+        after = robot.get_observation()
+        assert abs(after["elbow_flex.pos"] - before["elbow_flex.pos"]) < 1.5
+    finally:
+        robot.disconnect()
+        robot.disconnect()  # idempotent
+    assert not robot.is_connected
+
+
+def test_connect_names_the_silent_topic(tmp_path):
+    from so101.lerobot_robot import SO101ROS, SO101ROSConfig
+
+    robot = SO101ROS(SO101ROSConfig(namespace="nobody", calibration_dir=tmp_path, connect_timeout_s=1.0))
+    with pytest.raises(TimeoutError, match="/nobody/joint_states"):
+        robot.connect()
+    assert not robot.is_connected
