@@ -1,9 +1,9 @@
 #!/usr/bin/env bash
 # Run the benchmarks of docs/benchmarks.md (set-up first), all peers in one private network namespace.
-#   scripts/bench.sh                     all of them, with their defaults
+#   scripts/bench.sh                     all of them, with their defaults (no further arguments)
 #   scripts/bench.sh sim [--repeats N] [--seconds S] [--samples N] [--json FILE]
 #   scripts/bench.sh driver [--repeats N] [--seconds S] [--baud B] [--json FILE]
-#   scripts/bench.sh recorder [--seconds S] [--repeats N] [--workdir DIR] [--json FILE]
+#   scripts/bench.sh recorder [--seconds S] [--sweep-seconds S] [--rates HZ,...] [--repeats N] [--workdir DIR] [--json FILE]
 #   scripts/bench.sh cameras [--repeats N] [--seconds S] [--frames N] [--json FILE]
 #   scripts/bench.sh expert [--episodes N] [--speed S] [--seed N] [--json FILE]
 #   scripts/bench.sh convert [--episodes N] [--sizes WxH,...] [--json FILE]

@@ -14,7 +14,7 @@ REPO_ROOT="${SO101_ROOT}"
 
 episodes=5
 seed=0
-output="runs/dataset-$(date +%Y%m%d-%H%M%S)"
+output="${REPO_ROOT}/runs/dataset-$(date +%Y%m%d-%H%M%S)"
 sim_args=()
 launch_args=()
 usage() { help_if_asked "${BASH_SOURCE[0]}" --help; }
@@ -52,6 +52,7 @@ Summary: $(grep -m1 'episode(s)' "${output}/convert.txt")
   dataset:  ${dataset} (repo id local/so101_cube_to_bin, LeRobot v3.0)
   bags:     ${output}/bags     logs: ${output}/logs
 Next: train a policy on it, then run it on the sim:
+  cd ${REPO_ROOT}
   .venv/bin/lerobot-train --dataset.repo_id=local/so101_cube_to_bin --dataset.root=${dataset} \\
       --policy.type=act --policy.push_to_hub=false --output_dir=outputs/act_so101
   scripts/isolated .venv/bin/so101-run-policy outputs/act_so101/checkpoints/last/pretrained_model --eval 10

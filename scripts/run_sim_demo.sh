@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# The main job: set up, then run the simulated SO-101 headless with its built-in pick-and-place demo,
+# The sim demo: set up, then run the simulated SO-101 headless with its built-in pick-and-place demo,
 # and watch it from an rclpy peer that prints the arm, the cube and the task once a second.
 # Both run in one private network namespace (DDS stays on this machine). Ctrl-C stops both.
 #

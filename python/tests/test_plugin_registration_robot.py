@@ -97,3 +97,11 @@ def test_actions_are_clipped_to_the_joint_limits_and_clamped_to_max_relative_tar
     present = np.array([0.0, 0.0, 0.0, 0.0, 0.0, 0.5])
     radians, sent = command_from_action({"shoulder_pan.pos": 40.0, "elbow_flex.pos": -2.0}, zero, present, 5.0)
     assert sent["shoulder_pan.pos"] == pytest.approx(5.0) and sent["elbow_flex.pos"] == pytest.approx(-2.0)
+
+
+@pytest.mark.parametrize("bad", [float("nan"), float("inf"), "up", [1.0, 2.0]])
+def test_an_action_that_is_not_a_finite_number_is_refused_naming_the_joint(bad):
+    from so101.lerobot_robot import command_from_action
+
+    with pytest.raises(ValueError, match="elbow_flex.pos"):
+        command_from_action({"shoulder_pan.pos": 10.0, "elbow_flex.pos": bad}, np.zeros(6))

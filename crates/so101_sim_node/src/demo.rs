@@ -1,5 +1,5 @@
-//! The built-in demo motion of the main job: a scripted pick-and-place of the cube from its default
-//! position in the scene into the bin, repeated. Pure: targets as a function of time.
+//! The built-in demo motion of the sim demo (scripts/run_sim_demo.sh, `--demo`): a scripted
+//! pick-and-place of the cube from its default position in the scene into the bin, repeated. Pure: targets as a function of time.
 
 use so101_core::robot::{JointPositions, JOINT_COUNT};
 

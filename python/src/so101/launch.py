@@ -24,7 +24,7 @@ scripts/isolated (--host-network opts out, to reach ROS 2 tools on other hosts).
 
 Examples:
   so101-launch --control expert --episodes 10 --record --bags bags/
-  so101-launch --robot real --port /dev/ttyACM0 --robot-id my_arm --control policy --policy outputs/.../pretrained_model
+  so101-launch --robot real --port /dev/ttyACM0 --robot-id my_arm --control policy --policy outputs/act_so101/checkpoints/last/pretrained_model
   so101-launch --control teleop --teleop-source gamepad --record
 """
 

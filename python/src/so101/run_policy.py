@@ -1,5 +1,5 @@
 """so101-run-policy: drive the arm with a LeRobot policy (a local checkpoint such as
-outputs/train/.../checkpoints/last/pretrained_model, or a Hub id) through rclpy.
+outputs/act_so101/checkpoints/last/pretrained_model, or a Hub id) through rclpy.
 
 Live (default): observations from /joint_states and /camera/<name>/image_raw (the cameras the
 policy was trained with), one inference per period, /joint_commands at --fps. The same against

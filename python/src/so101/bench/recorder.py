@@ -1,7 +1,7 @@
 #!/usr/bin/env python3
 """Benchmark of recorder_node (docs/benchmarks.md), all in one run on one disk.
 
-1. The stack's load: two 640x480 rgb8 cameras at 30 Hz + joint states at 500 Hz
+1. The reference load (so101_load_publisher's defaults): two 640x480 rgb8 cameras at 30 Hz + joint states at 500 Hz
    (so101_load_publisher) recorded by recorder_node: every message kept? recorder CPU.
 2. Sustained: the two cameras at rising rates (joint states at 500 Hz): the highest rate the
    recorder keeps every message of, end to end (DDS receive + MCAP), in MB/s and messages/s.
@@ -139,7 +139,7 @@ def rust_write(bin_dir: Path, bag: str, out: Path, mode: str, fsync: bool) -> fl
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--bin-dir", type=Path, required=True)
-    parser.add_argument("--seconds", type=float, default=10.0, help="publishing time of the stack-load recording")
+    parser.add_argument("--seconds", type=float, default=10.0, help="publishing time of the reference-load recording")
     parser.add_argument("--sweep-seconds", type=float, default=4.0, help="publishing time of each sweep step")
     parser.add_argument("--rates", default="30,60,90,120,180,240", help="camera rates (Hz) of the sweep")
     parser.add_argument("--repeats", type=int, default=3, help="repeats of the writer comparison (medians)")
@@ -150,7 +150,7 @@ def main() -> int:
     work = Path(tempfile.mkdtemp(prefix="so101_bench_recorder_", dir=args.workdir))
     results: dict = {}
     try:
-        print("[1/3] the stack's load ...", file=sys.stderr, flush=True)
+        print("[1/3] the reference load ...", file=sys.stderr, flush=True)
         load = record(args.bin_dir, work / "load", ["--duration", str(args.seconds)])
         results["stack_load"] = load
 

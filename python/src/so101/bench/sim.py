@@ -4,7 +4,7 @@
 1. Physics speed: steps/s of the node at --speed max (no cameras) against `mujoco-testspeed` on the
    same scene file (target: ratio >= 0.9).
 2. Reaction latency: command -> /joint_states, from a Rust client (so101_latency_probe) and from
-   rclpy (bench_latency.py), against the rclpy <-> rclpy ping-pong round trip of a JointState.
+   rclpy (so101.bench.latency), against the rclpy <-> rclpy ping-pong round trip of a JointState.
 
 Must run inside one private network namespace (scripts/bench.sh does that). Prints a Markdown
 report on stdout and writes the raw numbers as JSON to --json.

@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""Main job: start so101_sim_node with its demo and watch it from an rclpy node.
+"""The sim demo: start so101_sim_node with its demo and watch it from an rclpy node.
 
 Prints once a second what a ROS 2 user would see on the topics: sim time, joint positions, the
 cube's position, the task's reward and success, and the frames per second of each camera. Must run inside a private network namespace
