@@ -67,7 +67,7 @@ def test_features_match_the_converters_dataset_features():
 
     cls = registered_env_config()
     cameras = {"top": (48, 64), "wrist": (32, 40)}
-    dataset = convert.features_for(cameras, use_videos=True)
+    dataset = convert.features_for(cameras, use_videos=True, environment_state=True)
     policy = env_to_policy_features(cls(cameras=cameras))
     # Every policy input/output of the env is a feature of the converter's datasets, same shape.
     for key, feature in policy.items():
@@ -80,10 +80,11 @@ def test_features_match_the_converters_dataset_features():
     assert {k for k in dataset if k.startswith("observation.")} == set(policy) - {"action"}
     assert policy["action"].type is FeatureType.ACTION
 
-    state_only = env_to_policy_features(cls())
+    # The defaults are the converter's: the cube's pose included, unless left out on both sides.
+    assert env_to_policy_features(cls())["observation.environment_state"].shape == (7,)
+    state_only = env_to_policy_features(cls(environment_state=False))
     assert set(state_only) == {"observation.state", "action"}
-    with_env_state = env_to_policy_features(cls(environment_state=True))
-    assert with_env_state["observation.environment_state"].shape == (7,)
+    assert "observation.environment_state" not in convert.features_for({}, use_videos=True, environment_state=False)
 
 
 def test_bad_task_or_camera_is_refused():

@@ -75,6 +75,7 @@ def test_expert_bags_become_a_lerobot_dataset_that_lerobot_loads_and_replays(
     assert dataset.features["observation.state"]["names"] == [f"{j}.pos" for j in JOINTS]
     assert dataset.features["observation.images.top"]["shape"] == (48, 64, 3)
     assert dataset.features["observation.images.top"]["dtype"] == "video"
+    assert dataset.features["observation.environment_state"]["shape"] == (7,)
 
     for episode_index, directory in enumerate(sorted(bags.glob("episode_00000[01]"))):
         states = bag_messages(directory, "/joint_states")
@@ -113,6 +114,16 @@ def test_expert_bags_become_a_lerobot_dataset_that_lerobot_loads_and_replays(
         assert actions[:, 5].min() < 5 and actions[:, 5].max() > 50, "the gripper never closed and opened in the actions"
         last = dataset[stop - 1]
         assert bool(last["next.success"].item()) is True, f"episode {episode_index} does not end in success"
+        # The environment state is the bag's /cube/pose of the frame's instant: the cube starts on
+        # the table and ends in the bin (positions that differ), always a unit quaternion.
+        poses = bag_messages(directory, "/cube/pose")
+        first, final = dataset[start]["observation.environment_state"].numpy(), last["observation.environment_state"].numpy()
+        for row, instant in ((first, matched[0][1]), (final, matched[0][1] + (stop - 1 - start) / 30)):
+            _, pose = min(poses, key=lambda pair: abs(pair[0] - instant))
+            expected = [pose.pose.position.x, pose.pose.position.y, pose.pose.position.z, pose.pose.orientation.w]
+            assert np.allclose(row[:4], expected, atol=2e-3), (row, expected)
+            assert abs(np.linalg.norm(row[3:]) - 1.0) < 1e-4, row
+        assert np.linalg.norm(final[:3] - first[:3]) > 0.05, "the cube did not move in the environment state"
 
     # Replayed on a fresh sim with the same seed (its first /sim/reset puts the cube where the
     # first episode had it), the dataset's actions put the cube in the bin again.

@@ -12,7 +12,7 @@ import numpy as np
 import yaml
 
 from . import contract
-from .messages import joint_positions, rgb_image
+from .messages import cube_pose_vector, joint_positions, rgb_image
 
 
 class BagError(Exception):
@@ -37,6 +37,9 @@ class Episode:
     joint_commands: Stream
     reward: Stream
     task_success: Stream
+    # The cube's pose from /cube/pose, stamped: float64[7] position (m) and orientation (w x y z),
+    # world frame (empty when the bag has no /cube/pose).
+    cube_pose: Stream
     cameras: dict[str, Stream]
 
 
@@ -103,6 +106,7 @@ def read_episode(path: Path, cameras: list[str] | None) -> Episode:
     raw_commands: list[tuple[float, np.ndarray]] = []
     raw_reward: list[tuple[float, float]] = []
     raw_success: list[tuple[float, bool]] = []
+    raw_cube: list[tuple[float, np.ndarray]] = []
     raw_images: dict[str, list[tuple[float, np.ndarray]]] = {}
     for file in files:
         try:
@@ -123,6 +127,8 @@ def read_episode(path: Path, cameras: list[str] | None) -> Episode:
                         raw_reward.append((received, float(ros.data)))
                     elif topic.endswith("/task/success"):
                         raw_success.append((received, bool(ros.data)))
+                    elif topic.endswith("/" + contract.CUBE_POSE):
+                        raw_cube.append((_stamp(ros.header), cube_pose_vector(ros.pose)))
                     elif "/camera/" in topic and topic.endswith("/image_raw"):
                         name = topic.rstrip("/").split("/")[-2]
                         if cameras is not None and name not in cameras:
@@ -164,5 +170,6 @@ def read_episode(path: Path, cameras: list[str] | None) -> Episode:
         joint_commands=stream(raw_commands),
         reward=stream(raw_reward),
         task_success=stream(raw_success),
+        cube_pose=stream(raw_cube, stamped=True),
         cameras={name: stream(frames, stamped=True) for name, frames in sorted(raw_images.items())},
     )

@@ -2,8 +2,9 @@
 through LeRobot's own LeRobotDataset API.
 
 Per frame (docs/lerobot.md): observation.state (the arm's /joint_states), action (the
-/joint_commands in force), observation.images.<camera> (video), next.reward, next.success, and
-the episode's task. Units are LeRobot's SO-101 conventions (degrees, gripper 0-100) unless
+/joint_commands in force), observation.environment_state (the cube's pose from /cube/pose: x y z
+in m and the orientation quaternion w x y z, world frame; --no-environment-state leaves it out),
+observation.images.<camera> (video), next.reward, next.success, and the episode's task. Units are LeRobot's SO-101 conventions (degrees, gripper 0-100) unless
 --units radians. An episode that cannot be converted faithfully (cut short, unreadable, a stream
 missing) is reported and skipped; the others are converted.
 """
@@ -36,11 +37,20 @@ class Frames:
     reward: np.ndarray  # [N] float32
     success: np.ndarray  # [N] bool
     images: dict[str, list[np.ndarray]]
+    environment_state: np.ndarray | None  # [N, 7] float32 cube pose, or None
 
 
-def frames_of(episode: Episode, fps: float, units: str) -> Frames:
-    """Resamples an episode onto the fps grid (alignment: so101.resample)."""
+def frames_of(episode: Episode, fps: float, units: str, environment_state: bool = True) -> Frames:
+    """Resamples an episode onto the fps grid (alignment: so101.resample). With
+    `environment_state`, the cube's pose (/cube/pose) of each frame too; an episode without it is
+    a BagError then."""
+    if environment_state and not episode.cube_pose.times:
+        raise BagError(
+            f"{episode.path.name}: no /cube/pose (observation.environment_state; --no-environment-state leaves it out)"
+        )
     streams = {"joint_states": episode.joint_states.times, "joint_commands": episode.joint_commands.times}
+    if environment_state:
+        streams["cube_pose"] = episode.cube_pose.times
     streams.update({f"camera {name}": stream.times for name, stream in episode.cameras.items()})
     # Commands stay in force after the last one (a teleop stops sending while holding); every
     # other stream may be held for one frame past its last message.
@@ -62,6 +72,9 @@ def frames_of(episode: Episode, fps: float, units: str) -> Frames:
     images = {
         name: [stream.values[i] for i in sample_and_hold(stream.times, instants)] for name, stream in episode.cameras.items()
     }
+    cube = None
+    if environment_state:
+        cube = np.stack([episode.cube_pose.values[i] for i in sample_and_hold(episode.cube_pose.times, instants)])
     success = np.array(held(episode.task_success, False), dtype=bool)
     if episode.success is not None:
         # The episode's verdict (metadata.yaml, from the operator or the expert) is its last
@@ -73,16 +86,28 @@ def frames_of(episode: Episode, fps: float, units: str) -> Frames:
         reward=np.array(held(episode.reward, 0.0), dtype=np.float32),
         success=success,
         images=images,
+        environment_state=None if cube is None else cube.astype(np.float32),
     )
 
 
-def features_for(cameras: dict[str, tuple[int, int]], use_videos: bool) -> dict:
+# observation.environment_state: the cube's pose in the world frame, position in m, orientation as
+# a unit quaternion (the sim's /cube/pose; the so101_sim env's environment_state).
+ENVIRONMENT_STATE_NAMES = ["cube.x", "cube.y", "cube.z", "cube.qw", "cube.qx", "cube.qy", "cube.qz"]
+
+
+def features_for(cameras: dict[str, tuple[int, int]], use_videos: bool, environment_state: bool = False) -> dict:
     features = {
         "observation.state": {"dtype": "float32", "shape": (6,), "names": FEATURE_NAMES},
         "action": {"dtype": "float32", "shape": (6,), "names": FEATURE_NAMES},
         "next.reward": {"dtype": "float32", "shape": (1,), "names": None},
         "next.success": {"dtype": "bool", "shape": (1,), "names": None},
     }
+    if environment_state:
+        features["observation.environment_state"] = {
+            "dtype": "float32",
+            "shape": (len(ENVIRONMENT_STATE_NAMES),),
+            "names": ENVIRONMENT_STATE_NAMES,
+        }
     for name, (height, width) in cameras.items():
         features[f"observation.images.{name}"] = {
             "dtype": "video" if use_videos else "image",
@@ -121,7 +146,7 @@ def convert(args) -> int:
             if args.successful_only and episode.success is not True:
                 skipped.append(f"{path.name}: not marked successful")
                 continue
-            frames = frames_of(episode, args.fps, args.units)
+            frames = frames_of(episode, args.fps, args.units, environment_state=not args.no_environment_state)
         except BagError as error:
             log.warning("skipped %s", error)
             skipped.append(str(error))
@@ -132,7 +157,7 @@ def convert(args) -> int:
             dataset = LeRobotDataset.create(
                 repo_id=args.repo_id,
                 fps=args.fps,
-                features=features_for(shapes, not args.no_videos),
+                features=features_for(shapes, not args.no_videos, environment_state=not args.no_environment_state),
                 root=args.output,
                 robot_type=ROBOT_TYPE,
                 use_videos=not args.no_videos,
@@ -153,6 +178,8 @@ def convert(args) -> int:
                 "next.success": frames.success[k : k + 1],
                 "task": task,
             }
+            if frames.environment_state is not None:
+                frame["observation.environment_state"] = frames.environment_state[k]
             for name, images in frames.images.items():
                 frame[f"observation.images.{name}"] = images[k]
             dataset.add_frame(frame)
@@ -191,6 +218,11 @@ def main(argv: list[str] | None = None) -> int:
     )
     parser.add_argument("--cameras", default=None, help="cameras to keep, comma-separated (default: every camera in the bags)")
     parser.add_argument("--task", default="put the cube in the bin", help="task text of episodes whose bag names none")
+    parser.add_argument(
+        "--no-environment-state",
+        action="store_true",
+        help="leave out observation.environment_state (the cube's pose from /cube/pose; needed otherwise)",
+    )
     parser.add_argument("--successful-only", action="store_true", help="keep only episodes marked successful")
     parser.add_argument("--no-videos", action="store_true", help="store camera frames as images, not video")
     parser.add_argument("--sequential-encoding", action="store_true", help="encode one camera's video at a time")

@@ -69,7 +69,7 @@ class So101SimEnvConfig(EnvConfig):
     fps: int = 30
     episode_length: int | None = None  # steps; None: 600 (cube_to_bin) or 300 (touch_cube)
     cameras: dict[str, tuple[int, int]] = field(default_factory=dict)
-    environment_state: bool = False  # add observation.environment_state (cube pose)
+    environment_state: bool = True  # observation.environment_state (cube pose), as the converter writes it
     task_description: str | None = None  # the episodes' task text; None: the task's default
     lite: bool = True  # the sim's lite rendering
     render_camera: str = "top"  # the camera of lerobot-eval's videos (render())

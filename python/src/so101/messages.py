@@ -27,3 +27,9 @@ def rgb_image(msg) -> np.ndarray:
         raise ValueError(f"image of {data.size} bytes too short for {msg.width}x{msg.height} (step {msg.step})")
     image = data[: msg.step * msg.height].reshape(msg.height, msg.step)[:, : msg.width * 3].reshape(msg.height, msg.width, 3)
     return (image[..., ::-1] if msg.encoding == "bgr8" else image).copy()
+
+
+def cube_pose_vector(pose) -> np.ndarray:
+    """A geometry_msgs/Pose as [x, y, z, qw, qx, qy, qz] (the environment state's layout)."""
+    p, q = pose.position, pose.orientation
+    return np.array([p.x, p.y, p.z, q.w, q.x, q.y, q.z], dtype=np.float64)

@@ -14,6 +14,8 @@ import numpy as np
 from .units import lerobot_from_radians, radians_from_lerobot
 
 STATE = "observation.state"
+ENVIRONMENT_STATE = "observation.environment_state"  # the cube's pose (so101.convert)
+ENVIRONMENT_STATE_SIZE = 7
 IMAGE_PREFIX = "observation.images."
 log = logging.getLogger(__name__)
 
@@ -80,7 +82,11 @@ class StackPolicy:
         self.cameras = [
             CameraInput(key.removeprefix(IMAGE_PREFIX), int(inputs[key].shape[1]), int(inputs[key].shape[2])) for key in visual
         ]
-        others = [key for key, feature in inputs.items() if key != STATE and feature.type is not FeatureType.VISUAL]
+        self.needs_environment_state = ENVIRONMENT_STATE in inputs
+        if self.needs_environment_state and tuple(inputs[ENVIRONMENT_STATE].shape) != (ENVIRONMENT_STATE_SIZE,):
+            raise PolicyError(f"the policy's {ENVIRONMENT_STATE} is {inputs[ENVIRONMENT_STATE]}, not the cube's pose (7 values)")
+        known = (STATE, ENVIRONMENT_STATE)
+        others = [key for key, feature in inputs.items() if key not in known and feature.type is not FeatureType.VISUAL]
         if others:
             raise PolicyError(f"the policy needs inputs the stack does not provide: {others}")
         log.info(
@@ -97,11 +103,18 @@ class StackPolicy:
         self.preprocessor.reset()
         self.postprocessor.reset()
 
-    def observation(self, positions: np.ndarray, images: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
-        """The policy's observation from joint positions (rad, contract order) and HxWx3 uint8
-        frames by camera name; frames of another size are resized to the policy's."""
+    def observation(
+        self, positions: np.ndarray, images: dict[str, np.ndarray], cube_pose: np.ndarray | None = None
+    ) -> dict[str, np.ndarray]:
+        """The policy's observation from joint positions (rad, contract order), HxWx3 uint8 frames
+        by camera name (frames of another size are resized to the policy's) and, for a policy
+        that takes the environment state, the cube's pose [x y z qw qx qy qz] (m, world frame)."""
         state = lerobot_from_radians(positions) if self.units == "lerobot" else np.asarray(positions, dtype=np.float64)
         observation = {STATE: state.astype(np.float32)}
+        if self.needs_environment_state:
+            if cube_pose is None:
+                raise PolicyError(f"the policy takes {ENVIRONMENT_STATE} (the cube's pose) and none was given")
+            observation[ENVIRONMENT_STATE] = np.asarray(cube_pose, dtype=np.float32)
         for camera in self.cameras:
             frame = images[camera.name]
             if frame.shape[:2] != (camera.height, camera.width):

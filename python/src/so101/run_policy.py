@@ -25,7 +25,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .messages import joint_positions, rgb_image
+from .messages import cube_pose_vector, joint_positions, rgb_image
 from .policy import PolicyError, StackPolicy
 from .rclpy_wait import spin_until
 from .units import JOINT_LIMITS, JOINT_NAMES
@@ -36,14 +36,22 @@ log = logging.getLogger("so101-run-policy")
 
 # =========================================================================== live
 class LiveInputs:
-    """The newest /joint_states and camera frames, with the wall time each arrived."""
+    """The newest /joint_states, camera frames and (for a policy that takes the environment state)
+    /cube/pose, with the wall time each arrived."""
 
-    def __init__(self, node, prefix: str, cameras: dict[str, str]):
+    def __init__(self, node, prefix: str, cameras: dict[str, str], cube_pose: bool = False):
+        from geometry_msgs.msg import PoseStamped
         from rclpy.qos import qos_profile_sensor_data
         from sensor_msgs.msg import Image, JointState
 
         self.state: tuple[float, object] | None = None
+        self.cube: tuple[float, object] | None = None
+        self.wants_cube = cube_pose
         self.frames: dict[str, tuple[float, object]] = {}
+        if cube_pose:
+            node.create_subscription(
+                PoseStamped, f"{prefix}/cube/pose", lambda msg: setattr(self, "cube", (time.monotonic(), msg)), 10
+            )
         # Best effort matches reliable and best-effort writers; only the newest message matters.
         node.create_subscription(JointState, f"{prefix}/joint_states", self._on_state, qos_profile_sensor_data)
         for name, topic in cameras.items():
@@ -56,10 +64,16 @@ class LiveInputs:
     def _on_frame(self, name: str, msg) -> None:
         self.frames[name] = (time.monotonic(), msg)
 
+    def cube_pose(self) -> np.ndarray | None:
+        """The newest cube pose as [x y z qw qx qy qz], or None."""
+        return None if self.cube is None else cube_pose_vector(self.cube[1].pose)
+
     def stale(self, cameras: list[str], max_age: float) -> list[str]:
         """The inputs missing or older than max_age seconds."""
         now = time.monotonic()
         inputs = {"/joint_states": self.state, **{f"camera {name}": self.frames.get(name) for name in cameras}}
+        if self.wants_cube:
+            inputs["/cube/pose"] = self.cube
         return [what for what, entry in inputs.items() if entry is None or now - entry[0] > max_age]
 
 
@@ -73,7 +87,7 @@ def run_live(args, policy: StackPolicy) -> int:
     topics.update(dict(item.split("=", 1) for item in args.camera))
     rclpy.init()
     node = rclpy.create_node("so101_policy_runner")
-    inputs = LiveInputs(node, prefix, topics)
+    inputs = LiveInputs(node, prefix, topics, cube_pose=policy.needs_environment_state)
     commands = node.create_publisher(JointState, f"{prefix}/joint_commands", 10)
     camera_names = [camera.name for camera in policy.cameras]
     period = 1.0 / args.fps
@@ -104,7 +118,9 @@ def run_live(args, policy: StackPolicy) -> int:
         # One inference before the clock starts: the first one (allocation, kernels) is slow.
         policy.act(
             policy.observation(
-                joint_positions(inputs.state[1]), {name: rgb_image(inputs.frames[name][1]) for name in camera_names}
+                joint_positions(inputs.state[1]),
+                {name: rgb_image(inputs.frames[name][1]) for name in camera_names},
+                inputs.cube_pose(),
             )
         )
         policy.reset()
@@ -122,7 +138,8 @@ def run_live(args, policy: StackPolicy) -> int:
                 positions = joint_positions(inputs.state[1])
                 images = {name: rgb_image(inputs.frames[name][1]) for name in camera_names}
                 # The arm's node clamps too; never send past the model's limits from here either.
-                target = np.clip(policy.act(policy.observation(positions, images)), JOINT_LIMITS[:, 0], JOINT_LIMITS[:, 1])
+                observation = policy.observation(positions, images, inputs.cube_pose())
+                target = np.clip(policy.act(observation), JOINT_LIMITS[:, 0], JOINT_LIMITS[:, 1])
                 inference.append(time.monotonic() - started)
                 msg = JointState(name=JOINT_NAMES, position=[float(v) for v in target])
                 msg.header.stamp = node.get_clock().now().to_msg()
@@ -194,7 +211,8 @@ def evaluate(args, policy: StackPolicy) -> int:
                 pixels = observation["pixels"] if cameras else {}
                 if video_cameras:
                     video.append(tile({name: pixels[name] for name in video_cameras}))
-                target = policy.act(policy.observation(state[:6].astype(np.float64), pixels))
+                # So101SimEnv's state: joints (6), velocities (6), cube position (3) and orientation (4).
+                target = policy.act(policy.observation(state[:6].astype(np.float64), pixels, state[12:19].astype(np.float64)))
                 observation, reward, terminated, _, info = env.step(target)
                 rewards.append(reward)
                 if info["success"]:
