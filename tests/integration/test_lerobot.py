@@ -151,3 +151,31 @@ def test_expert_bags_become_a_lerobot_dataset_that_lerobot_loads_and_replays(
     )
     assert done.returncode == 0 and "replayed" in done.stdout, done.stdout + done.stderr
     wait_until(lambda: success.count() > 0 and success.latest().data, 5.0, "/task/success after the replay")
+
+    # The same bags for a small vision policy: one camera, scaled, no environment state.
+    small = tmp_path / "small"
+    done = subprocess.run(
+        [
+            str(CONVERTER),
+            str(bags),
+            "--output",
+            str(small),
+            "--repo-id",
+            "local/so101_small",
+            "--quiet",
+            "--cameras",
+            "top",
+            "--image-size",
+            "32x24",
+            "--no-environment-state",
+        ],
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
+    assert done.returncode == 0, done.stdout + done.stderr
+    scaled = LeRobotDataset("local/so101_small", root=small)
+    assert scaled.num_episodes == 2 and scaled.num_frames == dataset.num_frames
+    assert [k for k in scaled.features if k.startswith("observation.")] == ["observation.state", "observation.images.top"]
+    assert scaled.features["observation.images.top"]["shape"] == (24, 32, 3)
+    assert tuple(scaled[0]["observation.images.top"].shape) == (3, 24, 32)

@@ -117,6 +117,26 @@ def features_for(cameras: dict[str, tuple[int, int]], use_videos: bool, environm
     return features
 
 
+def resized(images: list[np.ndarray], width: int, height: int) -> list[np.ndarray]:
+    """The frames scaled to width x height (area averaging when shrinking, as for a small policy's input)."""
+    from PIL import Image
+
+    if images and images[0].shape[:2] == (height, width):
+        return images
+    return [np.asarray(Image.fromarray(image).resize((width, height), Image.BOX)) for image in images]
+
+
+def image_size(text: str) -> tuple[int, int]:
+    """WIDTHxHEIGHT (the sim's --cameras notation) -> (width, height)."""
+    try:
+        width, height = (int(part) for part in text.lower().split("x"))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r}: WIDTHxHEIGHT, e.g. 128x96") from None
+    if not (8 <= width <= 4096 and 8 <= height <= 4096):
+        raise argparse.ArgumentTypeError(f"{text!r}: each side 8 to 4096 pixels")
+    return width, height
+
+
 def quiet_video_encoder() -> None:
     """The AV1 encoder (SVT-AV1) and FFmpeg's muxer print their settings for every video: keep
     their warnings and errors only, so the progress bar and the summary stay readable."""
@@ -147,6 +167,8 @@ def convert(args) -> int:
                 skipped.append(f"{path.name}: not marked successful")
                 continue
             frames = frames_of(episode, args.fps, args.units, environment_state=not args.no_environment_state)
+            if args.image_size:
+                frames.images = {name: resized(images, *args.image_size) for name, images in frames.images.items()}
         except BagError as error:
             log.warning("skipped %s", error)
             skipped.append(str(error))
@@ -217,6 +239,13 @@ def main(argv: list[str] | None = None) -> int:
         help="joint units: LeRobot's SO-101 conventions (degrees, gripper 0-100) or the stack's radians",
     )
     parser.add_argument("--cameras", default=None, help="cameras to keep, comma-separated (default: every camera in the bags)")
+    parser.add_argument(
+        "--image-size",
+        type=image_size,
+        default=None,
+        metavar="WxH",
+        help="scale every kept camera's frames to WIDTHxHEIGHT, e.g. 128x96 for a small vision policy (default: as recorded)",
+    )
     parser.add_argument("--task", default="put the cube in the bin", help="task text of episodes whose bag names none")
     parser.add_argument(
         "--no-environment-state",
