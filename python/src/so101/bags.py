@@ -100,7 +100,9 @@ def read_episode(path: Path, cameras: list[str] | None) -> Episode:
     try:
         info = yaml.safe_load(metadata_file.read_text())["rosbag2_bagfile_information"]
     except Exception as error:  # noqa: BLE001 - any malformed file is reported the same way
-        raise BagError(f"{path.name}: unreadable metadata.yaml ({type(error).__name__}: {error})") from error
+        raise BagError(
+            f"{path.name}: unreadable metadata.yaml ({type(error).__name__}: {' '.join(str(error).split())})"
+        ) from error
     if not isinstance(info, dict):
         raise BagError(f"{path.name}: malformed metadata.yaml (rosbag2_bagfile_information is not a mapping)")
     custom = info.get("custom_data") or {}

@@ -1,12 +1,15 @@
 """so101-bag-to-lerobot: recorder_node's episode bags -> a LeRobot dataset (codebase v3.0), written
 through LeRobot's own LeRobotDataset API.
 
-Per frame (docs/lerobot.md): observation.state (the arm's /joint_states), action (the
-/joint_commands in force), observation.environment_state (the cube's pose from /cube/pose: x y z
+Per frame (docs/lerobot.md): observation.state (the arm's /joint_states), action (the target
+the robot obeyed: /joint_commands and /forward_position_controller/commands validated, clamped and
+merged as the nodes do, so101.commands), observation.environment_state (the cube's pose from /cube/pose: x y z
 in m and the orientation quaternion w x y z, world frame; --no-environment-state leaves it out),
 observation.images.<camera> (video), next.reward, next.success, and the episode's task. Units are LeRobot's SO-101 conventions (degrees, gripper 0-100) unless
 --units radians. An episode that cannot be converted faithfully (cut short, unreadable, a stream
-missing) is reported and skipped; the others are converted.
+missing, a camera changing size, malformed metadata) is reported and skipped; the others are
+converted. A silence longer than --max-gap in the joint states, cube pose or a camera splits an
+episode into parts, each converted as an episode of its own when it has at least two frames.
 """
 
 from __future__ import annotations
@@ -269,19 +272,27 @@ def convert(args) -> int:
                 log.warning("skipped %s", error)
                 skipped.append(error)
                 continue
-            for k in range(len(frames.state)):
-                frame = {
-                    "observation.state": frames.state[k],
-                    "action": frames.action[k],
-                    "next.reward": frames.reward[k : k + 1],
-                    "next.success": frames.success[k : k + 1],
-                    "task": task,
-                }
-                if frames.environment_state is not None:
-                    frame["observation.environment_state"] = frames.environment_state[k]
-                for name, images in frames.images.items():
-                    frame[f"observation.images.{name}"] = images[k]
-                dataset.add_frame(frame)
+            try:
+                for k in range(len(frames.state)):
+                    frame = {
+                        "observation.state": frames.state[k],
+                        "action": frames.action[k],
+                        "next.reward": frames.reward[k : k + 1],
+                        "next.success": frames.success[k : k + 1],
+                        "task": task,
+                    }
+                    if frames.environment_state is not None:
+                        frame["observation.environment_state"] = frames.environment_state[k]
+                    for name, images in frames.images.items():
+                        frame[f"observation.images.{name}"] = images[k]
+                    dataset.add_frame(frame)
+            except Exception as error:  # noqa: BLE001 - LeRobot's frame validation: this episode only
+                # Nothing of the episode is saved: its buffer (and images written so far) is dropped.
+                dataset.clear_episode_buffer()
+                reason = f"{label}: refused by LeRobot ({type(error).__name__}: {error})"
+                log.warning("skipped %s", reason)
+                skipped.append(reason)
+                continue
             dataset.save_episode(parallel_encoding=not args.sequential_encoding)
             converted += 1
             successful += bool(frames.success[-1])  # the verdict of the episode (its last frame)
