@@ -133,3 +133,19 @@ def test_the_dataset_holds_exactly_the_good_episodes_with_the_obeyed_actions(con
     # The verdict from metadata.yaml ends the last part only.
     success = np.asarray(frames["next.success"]).reshape(-1)
     assert not success[spans[1][1] - 1] and success[spans[2][1] - 1]
+
+
+def test_only_bad_episodes_fail_without_a_dataset(tmp_path, capsys):
+    bag = simple_episode(tmp_path / "bags" / "episode_000000")
+    bag.command(0.5, ["gripper"], [math.nan])
+    bag.close(metadata="rosbag2_bagfile_information: 5\n")
+    commands_only_rejected = EpisodeBag(tmp_path / "bags" / "episode_000001")
+    observed(commands_only_rejected, 0.0, 1.0)
+    commands_only_rejected.array_command(0.1, [0.0] * 7)
+    commands_only_rejected.close()
+    output = tmp_path / "dataset"
+    assert main([str(tmp_path / "bags"), "--output", str(output), "--no-videos", "--quiet"]) == 1
+    summary = capsys.readouterr().out
+    assert "episode_000000: malformed metadata.yaml (rosbag2_bagfile_information is not a mapping)" in summary
+    assert "episode_000001: no valid /joint_commands or /forward_position_controller/commands (action) (1 rejected" in summary
+    assert not output.exists()
