@@ -12,6 +12,7 @@ import numpy as np
 import yaml
 
 from . import contract
+from .commands import CommandError, obeyed_targets, targets_from_array, targets_from_joint_state
 from .messages import cube_pose_vector, joint_positions, rgb_image
 
 
@@ -41,6 +42,9 @@ class Episode:
     # world frame (empty when the bag has no /cube/pose).
     cube_pose: Stream
     cameras: dict[str, Stream]
+    # Command messages the nodes would have rejected (so101.commands), with the first reasons.
+    rejected_commands: int = 0
+    rejection_reasons: list[str] = field(default_factory=list)
 
 
 def _split_number(path: Path) -> int | None:
@@ -96,14 +100,24 @@ def read_episode(path: Path, cameras: list[str] | None) -> Episode:
     try:
         info = yaml.safe_load(metadata_file.read_text())["rosbag2_bagfile_information"]
     except Exception as error:  # noqa: BLE001 - any malformed file is reported the same way
-        raise BagError(f"{path.name}: unreadable metadata.yaml ({error})") from error
+        raise BagError(
+            f"{path.name}: unreadable metadata.yaml ({type(error).__name__}: {' '.join(str(error).split())})"
+        ) from error
+    if not isinstance(info, dict):
+        raise BagError(f"{path.name}: malformed metadata.yaml (rosbag2_bagfile_information is not a mapping)")
     custom = info.get("custom_data") or {}
-    files = [path / entry for entry in info.get("relative_file_paths", [])]
+    if not isinstance(custom, dict):
+        raise BagError(f"{path.name}: malformed metadata.yaml (custom_data is not a mapping)")
+    relative = info.get("relative_file_paths")
+    if not isinstance(relative, list) or not all(isinstance(entry, str) for entry in relative):
+        raise BagError(f"{path.name}: malformed metadata.yaml (relative_file_paths is not a list of file names)")
+    files = [path / entry for entry in relative]
     if not files or not all(f.is_file() for f in files):
         raise BagError(f"{path.name}: metadata.yaml lists files that are missing: {files}")
 
     raw_states: list[tuple[float, float, np.ndarray]] = []  # (receive time, stamp, positions)
-    raw_commands: list[tuple[float, np.ndarray]] = []
+    # (receive time, topic order, targets or the reason the nodes reject the message)
+    raw_commands: list[tuple[float, int, object]] = []
     raw_reward: list[tuple[float, float]] = []
     raw_success: list[tuple[float, bool]] = []
     raw_cube: list[tuple[float, np.ndarray]] = []
@@ -119,10 +133,19 @@ def read_episode(path: Path, cameras: list[str] | None) -> Episode:
                         positions = joint_positions(ros)
                         if positions is not None:
                             raw_states.append((received, _stamp(ros.header), positions))
-                    elif topic.endswith("/joint_commands"):
-                        positions = joint_positions(ros)
-                        if positions is not None:
-                            raw_commands.append((received, positions))
+                    elif topic.endswith("/" + contract.JOINT_COMMANDS) or topic.endswith(
+                        "/" + contract.FORWARD_POSITION_COMMANDS
+                    ):
+                        # A node drains /joint_commands before the array topic in each tick.
+                        array = topic.endswith("/" + contract.FORWARD_POSITION_COMMANDS)
+                        try:
+                            if array:
+                                targets = targets_from_array(list(ros.data))
+                            else:
+                                targets = targets_from_joint_state(list(ros.name), list(ros.position))
+                        except CommandError as error:
+                            targets = f"{topic}: {error}"
+                        raw_commands.append((received, int(array), targets))
                     elif topic.endswith("/task/reward"):
                         raw_reward.append((received, float(ros.data)))
                     elif topic.endswith("/task/success"):
@@ -137,7 +160,14 @@ def read_episode(path: Path, cameras: list[str] | None) -> Episode:
                             image = rgb_image(ros)
                         except ValueError as error:
                             raise BagError(f"{path.name}: {topic}: {error}") from error
-                        raw_images.setdefault(name, []).append((_stamp(ros.header), image))
+                        frames = raw_images.setdefault(name, [])
+                        if frames and frames[0][1].shape != image.shape:
+                            first, now = frames[0][1].shape, image.shape
+                            raise BagError(
+                                f"{path.name}: camera {name!r} changed size from {first[1]}x{first[0]} "
+                                f"to {now[1]}x{now[0]} at t={_stamp(ros.header):.3f} s"
+                            )
+                        frames.append((_stamp(ros.header), image))
         except BagError:
             raise
         except Exception as error:  # noqa: BLE001 - a damaged file is reported, not fatal
@@ -145,8 +175,12 @@ def read_episode(path: Path, cameras: list[str] | None) -> Episode:
 
     if len(raw_states) < 2:
         raise BagError(f"{path.name}: no /joint_states (observation.state)")
-    if not raw_commands:
-        raise BagError(f"{path.name}: no /joint_commands (action)")
+    raw_commands.sort(key=lambda entry: (entry[0], entry[1]))
+    accepted = [(t, c) for t, _, c in raw_commands if not isinstance(c, str)]
+    reasons = [c for _, _, c in raw_commands if isinstance(c, str)]
+    if not accepted:
+        detail = f" ({len(reasons)} rejected, e.g. {reasons[0]})" if reasons else ""
+        raise BagError(f"{path.name}: no valid /joint_commands or /forward_position_controller/commands (action){detail}")
     for name in cameras or []:
         if not raw_images.get(name):
             raise BagError(f"{path.name}: no frames of camera {name!r}")
@@ -160,6 +194,12 @@ def read_episode(path: Path, cameras: list[str] | None) -> Episode:
         times = [t for t, _ in pairs] if stamped else list(to_sim([t for t, _ in pairs]))
         return Stream(times=times, values=[v for _, v in pairs])
 
+    # The robot held its measured position until the first command (so101.commands).
+    raw_states.sort(key=lambda entry: entry[1])
+    first_command = float(to_sim([accepted[0][0]])[0])
+    held = [p for _, s, p in raw_states if s <= first_command + 1e-9] or [raw_states[0][2]]
+    targets = obeyed_targets([c for _, c in accepted], held[-1])
+
     success_text = str(custom.get(contract.CUSTOM_SUCCESS, "")).lower()
     return Episode(
         path=path,
@@ -167,9 +207,11 @@ def read_episode(path: Path, cameras: list[str] | None) -> Episode:
         success={"true": True, "false": False}.get(success_text),
         seed=str(custom.get(contract.CUSTOM_SEED, "")),
         joint_states=stream([(s, p) for _, s, p in raw_states], stamped=True),
-        joint_commands=stream(raw_commands),
+        joint_commands=stream([(t, target) for (t, _), target in zip(accepted, targets)]),
         reward=stream(raw_reward),
         task_success=stream(raw_success),
         cube_pose=stream(raw_cube, stamped=True),
         cameras={name: stream(frames, stamped=True) for name, frames in sorted(raw_images.items())},
+        rejected_commands=len(reasons),
+        rejection_reasons=reasons[:3],
     )

@@ -1,12 +1,15 @@
 """so101-bag-to-lerobot: recorder_node's episode bags -> a LeRobot dataset (codebase v3.0), written
 through LeRobot's own LeRobotDataset API.
 
-Per frame (docs/lerobot.md): observation.state (the arm's /joint_states), action (the
-/joint_commands in force), observation.environment_state (the cube's pose from /cube/pose: x y z
+Per frame (docs/lerobot.md): observation.state (the arm's /joint_states), action (the target
+the robot obeyed: /joint_commands and /forward_position_controller/commands validated, clamped and
+merged as the nodes do, so101.commands), observation.environment_state (the cube's pose from /cube/pose: x y z
 in m and the orientation quaternion w x y z, world frame; --no-environment-state leaves it out),
 observation.images.<camera> (video), next.reward, next.success, and the episode's task. Units are LeRobot's SO-101 conventions (degrees, gripper 0-100) unless
 --units radians. An episode that cannot be converted faithfully (cut short, unreadable, a stream
-missing) is reported and skipped; the others are converted.
+missing, a camera changing size, malformed metadata) is reported and skipped; the others are
+converted. A silence longer than --max-gap in the joint states, cube pose or a camera splits an
+episode into parts, each converted as an episode of its own when it has at least two frames.
 """
 
 from __future__ import annotations
@@ -15,16 +18,18 @@ import argparse
 import logging
 import sys
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
 
 from .bags import BagError, Episode, episode_dirs, read_episode
-from .resample import frame_times, sample_and_hold
+from .resample import frame_times, gaps, parts_between, sample_and_hold
 from .units import FEATURE_NAMES, lerobot_from_radians
 
 ROBOT_TYPE = "so_follower"
+# The fewest frames an episode (or a part of one split at a gap) needs to be kept.
+MIN_FRAMES = 2
 log = logging.getLogger("so101.convert")
 
 
@@ -88,6 +93,48 @@ def frames_of(episode: Episode, fps: float, units: str, environment_state: bool 
         images=images,
         environment_state=None if cube is None else cube.astype(np.float32),
     )
+
+
+def stamped_streams(episode: Episode, environment_state: bool) -> dict[str, list[float]]:
+    """The streams whose silence is a gap in what was observed (the commands are not: while no
+    command arrives the robot holds the last target, which is exactly what `action` holds)."""
+    streams = {"/joint_states": episode.joint_states.times}
+    if environment_state:
+        streams["/cube/pose"] = episode.cube_pose.times
+    streams.update({f"/camera/{name}/image_raw": stream.times for name, stream in episode.cameras.items()})
+    return streams
+
+
+def episode_parts(episode: Episode, max_gap: float, environment_state: bool) -> tuple[list[Episode], str | None]:
+    """The episode cut at every gap longer than `max_gap` s in its joint states, cube pose or
+    camera frames, and a message naming the gaps (None when there is none). Each part keeps the
+    messages of those streams within its span; commands, reward and success are kept whole (they
+    are held: each frame takes the latest at or before its instant). Only the last part keeps the
+    episode's verdict from metadata.yaml."""
+    found = gaps(stamped_streams(episode, environment_state), max_gap)
+    if not found:
+        return [episode], None
+    spans = parts_between(found)
+
+    def within(stream, start, end):
+        keep = [i for i, t in enumerate(stream.times) if start <= t <= end]
+        return type(stream)(times=[stream.times[i] for i in keep], values=[stream.values[i] for i in keep])
+
+    parts = []
+    for k, (start, end) in enumerate(spans):
+        parts.append(
+            replace(
+                episode,
+                success=episode.success if k == len(spans) - 1 else None,
+                joint_states=within(episode.joint_states, start, end),
+                cube_pose=within(episode.cube_pose, start, end),
+                cameras={name: within(stream, start, end) for name, stream in episode.cameras.items()},
+            )
+        )
+    listed = ", ".join(f"{name} {after - before:.2f} s at t={before:.2f} s" for name, before, after in found[:5])
+    more = f" and {len(found) - 5} more" if len(found) > 5 else ""
+    message = f"{episode.path.name}: gap(s) longer than {max_gap} s ({listed}{more}): split into {len(spans)} parts"
+    return parts, message
 
 
 # observation.environment_state: the cube's pose in the world frame, position in m, orientation as
@@ -160,55 +207,96 @@ def convert(args) -> int:
     dataset = None
     converted, successful, skipped, frames_written = 0, 0, [], 0
     started = time.monotonic()
+    notes: list[str] = []
+    environment_state = not args.no_environment_state
     for path in tqdm(paths, desc="episodes", unit="episode", disable=args.quiet):
         try:
             episode = read_episode(path, cameras)
             if args.successful_only and episode.success is not True:
                 skipped.append(f"{path.name}: not marked successful")
                 continue
-            frames = frames_of(episode, args.fps, args.units, environment_state=not args.no_environment_state)
-            if args.image_size:
-                frames.images = {name: resized(images, *args.image_size) for name, images in frames.images.items()}
+            if episode.rejected_commands:
+                note = (
+                    f"{path.name}: {episode.rejected_commands} command(s) rejected as the nodes reject them, "
+                    f"left out of the action (e.g. {episode.rejection_reasons[0]})"
+                )
+                log.warning("%s", note)
+                notes.append(note)
+            parts, message = episode_parts(episode, args.max_gap, environment_state)
+            if message:
+                log.warning("%s", message)
+                notes.append(message)
+            # Every part's frames first: nothing of an episode goes into the dataset before all of
+            # it is known to fit.
+            all_frames = []
+            for k, part in enumerate(parts):
+                label = path.name if len(parts) == 1 else f"{path.name} part {k + 1}/{len(parts)}"
+                try:
+                    frames = frames_of(part, args.fps, args.units, environment_state=environment_state)
+                except BagError as error:
+                    if len(parts) == 1:
+                        raise
+                    frames, reason = None, str(error).removeprefix(f"{path.name}: ")
+                else:
+                    reason = None if len(frames.state) >= MIN_FRAMES else f"{len(frames.state)} frame(s)"
+                if reason:
+                    note = f"{label}: left out ({reason}; at least {MIN_FRAMES} frames needed)"
+                    log.warning("%s", note)
+                    notes.append(note)
+                    continue
+                if args.image_size:
+                    frames.images = {name: resized(images, *args.image_size) for name, images in frames.images.items()}
+                all_frames.append((label, episode.task or args.task, frames))
+            if not all_frames:
+                raise BagError(f"{path.name}: no part of it long enough after splitting at gaps")
         except BagError as error:
             log.warning("skipped %s", error)
             skipped.append(str(error))
             continue
-        shapes = {name: images[0].shape[:2] for name, images in frames.images.items()}
-        if dataset is None:
-            cameras = list(shapes)
-            dataset = LeRobotDataset.create(
-                repo_id=args.repo_id,
-                fps=args.fps,
-                features=features_for(shapes, not args.no_videos, environment_state=not args.no_environment_state),
-                root=args.output,
-                robot_type=ROBOT_TYPE,
-                use_videos=not args.no_videos,
-            )
-        elif list(shapes) != cameras or any(
-            dataset.features[f"observation.images.{n}"]["shape"][:2] != tuple(s) for n, s in shapes.items()
-        ):
-            error = f"{path.name}: cameras {shapes} differ from the dataset's ({cameras})"
-            log.warning("skipped %s", error)
-            skipped.append(error)
-            continue
-        task = episode.task or args.task
-        for k in range(len(frames.state)):
-            frame = {
-                "observation.state": frames.state[k],
-                "action": frames.action[k],
-                "next.reward": frames.reward[k : k + 1],
-                "next.success": frames.success[k : k + 1],
-                "task": task,
-            }
-            if frames.environment_state is not None:
-                frame["observation.environment_state"] = frames.environment_state[k]
-            for name, images in frames.images.items():
-                frame[f"observation.images.{name}"] = images[k]
-            dataset.add_frame(frame)
-        dataset.save_episode(parallel_encoding=not args.sequential_encoding)
-        converted += 1
-        successful += bool(frames.success[-1])  # the verdict of the episode (its last frame)
-        frames_written += len(frames.state)
+        for label, task, frames in all_frames:
+            shapes = {name: images[0].shape[:2] for name, images in frames.images.items()}
+            if dataset is None:
+                cameras = list(shapes)
+                dataset = LeRobotDataset.create(
+                    repo_id=args.repo_id,
+                    fps=args.fps,
+                    features=features_for(shapes, not args.no_videos, environment_state=environment_state),
+                    root=args.output,
+                    robot_type=ROBOT_TYPE,
+                    use_videos=not args.no_videos,
+                )
+            elif list(shapes) != cameras or any(
+                dataset.features[f"observation.images.{n}"]["shape"][:2] != tuple(s) for n, s in shapes.items()
+            ):
+                error = f"{label}: cameras {shapes} differ from the dataset's ({cameras})"
+                log.warning("skipped %s", error)
+                skipped.append(error)
+                continue
+            try:
+                for k in range(len(frames.state)):
+                    frame = {
+                        "observation.state": frames.state[k],
+                        "action": frames.action[k],
+                        "next.reward": frames.reward[k : k + 1],
+                        "next.success": frames.success[k : k + 1],
+                        "task": task,
+                    }
+                    if frames.environment_state is not None:
+                        frame["observation.environment_state"] = frames.environment_state[k]
+                    for name, images in frames.images.items():
+                        frame[f"observation.images.{name}"] = images[k]
+                    dataset.add_frame(frame)
+            except Exception as error:  # noqa: BLE001 - LeRobot's frame validation: this episode only
+                # Nothing of the episode is saved: its buffer (and images written so far) is dropped.
+                dataset.clear_episode_buffer()
+                reason = f"{label}: refused by LeRobot ({type(error).__name__}: {error})"
+                log.warning("skipped %s", reason)
+                skipped.append(reason)
+                continue
+            dataset.save_episode(parallel_encoding=not args.sequential_encoding)
+            converted += 1
+            successful += bool(frames.success[-1])  # the verdict of the episode (its last frame)
+            frames_written += len(frames.state)
     if dataset is not None:
         dataset.finalize()
         if args.push_to_hub:
@@ -219,6 +307,8 @@ def convert(args) -> int:
         f"({seconds:.1f} s, {frames_written / max(seconds, 1e-9):.0f} frames/s); {len(skipped)} skipped"
     )
     print(summary)
+    for note in notes:
+        print(f"  note: {note}")
     for reason in skipped:
         print(f"  skipped: {reason}")
     return 0 if converted else 1
@@ -252,6 +342,13 @@ def main(argv: list[str] | None = None) -> int:
         action="store_true",
         help="leave out observation.environment_state (the cube's pose from /cube/pose; needed otherwise)",
     )
+    parser.add_argument(
+        "--max-gap",
+        type=float,
+        default=0.5,
+        metavar="SECONDS",
+        help="a silence longer than this in the joint states, the cube pose or a camera splits the episode (default 0.5)",
+    )
     parser.add_argument("--successful-only", action="store_true", help="keep only episodes marked successful")
     parser.add_argument("--no-videos", action="store_true", help="store camera frames as images, not video")
     parser.add_argument("--sequential-encoding", action="store_true", help="encode one camera's video at a time")
@@ -261,6 +358,8 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     if args.fps <= 0:
         parser.error("--fps must be positive")
+    if not args.max_gap > 0:
+        parser.error("--max-gap must be positive")
     logging.basicConfig(level=logging.INFO, format="%(levelname)s %(name)s: %(message)s")
     quiet_video_encoder()
     try:

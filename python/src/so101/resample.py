@@ -55,3 +55,27 @@ class WallToSim:
 
     def __call__(self, wall_times) -> np.ndarray:
         return np.interp(np.asarray(wall_times, dtype=np.float64), self.wall, self.sim)
+
+
+def gaps(streams: dict[str, list[float]], max_gap: float) -> list[tuple[str, float, float]]:
+    """(stream, last time before, first time after) of every silence longer than `max_gap` between
+    two consecutive messages of a stream, by start time."""
+    found = []
+    for name, times in streams.items():
+        steps = np.diff(np.asarray(times, dtype=np.float64))
+        found.extend((name, float(times[i]), float(times[i + 1])) for i in np.flatnonzero(steps > max_gap))
+    return sorted(found, key=lambda gap: (gap[1], gap[2]))
+
+
+def parts_between(found: list[tuple[str, float, float]]) -> list[tuple[float, float]]:
+    """The time spans (start, end) left between the gaps (`gaps`' result): the first starts at
+    -inf, the last ends at +inf; overlapping gaps make one break."""
+    parts, start = [], -np.inf
+    for _name, before, after in found:
+        if before >= start:
+            parts.append((start, before))
+            start = after
+        else:  # a gap that began inside the previous one
+            start = max(start, after)
+    parts.append((start, np.inf))
+    return parts
