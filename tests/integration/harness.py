@@ -511,3 +511,18 @@ def scene_body_poses(joints: dict[str, float]) -> dict[str, tuple]:
 def grasp_point(joints: dict[str, float]):
     """World position of the scene's gripper_tip site (the grasp point)."""
     return scene_body_poses(joints)["gripper_tip"][1]
+
+
+# lerobot-train's ACT shrunk to a few thousand transformer weights, CPU, no pretrained backbone
+# (nothing downloaded), nothing pushed: what the tests that train a policy share.
+TINY_ACT = [
+    "--policy.type=act",
+    "--policy.device=cpu",
+    "--policy.push_to_hub=false",
+    "--policy.pretrained_backbone_weights=null",
+    "--policy.dim_model=32",
+    "--policy.n_heads=2",
+    "--policy.dim_feedforward=64",
+    "--policy.n_encoder_layers=1",
+    "--policy.n_decoder_layers=1",
+]

@@ -14,7 +14,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from harness import Probe, SimNode, node_binary, stop_nodes, wait_until
+from harness import TINY_ACT, Probe, SimNode, node_binary, stop_nodes, wait_until
 
 VENV_BIN = Path(sys.executable).parent
 SEED = 3  # the sim's seed while recording: the env reset with it puts the cube where episode 0 had it
@@ -126,15 +126,7 @@ def test_lerobot_train_evaluates_on_the_env_and_lerobot_eval_runs_its_policy(dat
             VENV_BIN / "lerobot-train",
             f"--dataset.repo_id={REPO_ID}",
             f"--dataset.root={dataset}",
-            "--policy.type=act",
-            "--policy.device=cpu",
-            "--policy.push_to_hub=false",
-            "--policy.pretrained_backbone_weights=null",
-            "--policy.dim_model=32",
-            "--policy.n_heads=2",
-            "--policy.dim_feedforward=64",
-            "--policy.n_encoder_layers=1",
-            "--policy.n_decoder_layers=1",
+            *TINY_ACT,
             "--policy.n_vae_encoder_layers=1",
             "--policy.chunk_size=5",
             "--policy.n_action_steps=5",

@@ -25,7 +25,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 from driver_harness import ServoEmulator
-from harness import REPO_ROOT, Probe, SimNode, best_effort_qos, node_binary, stop_nodes, wait_until
+from harness import REPO_ROOT, TINY_ACT, Probe, SimNode, best_effort_qos, node_binary, stop_nodes, wait_until
 
 from so101 import contract
 
@@ -227,16 +227,8 @@ def tiny_act(recording) -> Path:
             str(BIN / "lerobot-train"),
             "--dataset.repo_id=local/so101_ros_test",
             f"--dataset.root={recording['dataset']}",
-            "--policy.type=act",
-            "--policy.device=cpu",
-            "--policy.push_to_hub=false",
-            "--policy.pretrained_backbone_weights=null",
+            *TINY_ACT,
             "--policy.use_vae=false",
-            "--policy.dim_model=32",
-            "--policy.n_heads=2",
-            "--policy.dim_feedforward=64",
-            "--policy.n_encoder_layers=1",
-            "--policy.n_decoder_layers=1",
             "--policy.chunk_size=10",
             "--policy.n_action_steps=10",
             "--steps=2",

@@ -15,7 +15,7 @@ import sys
 from pathlib import Path
 
 import numpy as np
-from harness import best_effort_qos, reliable_qos, wait_until
+from harness import TINY_ACT, best_effort_qos, reliable_qos, wait_until
 
 JOINTS = ["shoulder_pan", "shoulder_lift", "elbow_flex", "wrist_flex", "wrist_roll", "gripper"]
 LIMITS = [(-1.9199, 1.9199), (-1.7453, 1.7453), (-1.69, 1.69), (-1.6581, 1.6581), (-2.7438, 2.8412), (-0.1745, 1.7453)]
@@ -36,15 +36,7 @@ def train_tiny_act(dataset: Path, output: Path) -> Path:
             VENV_BIN / "lerobot-train",
             "--dataset.repo_id=local/so101_policy_test",
             f"--dataset.root={dataset}",
-            "--policy.type=act",
-            "--policy.device=cpu",
-            "--policy.push_to_hub=false",
-            "--policy.pretrained_backbone_weights=null",
-            "--policy.dim_model=32",
-            "--policy.n_heads=2",
-            "--policy.dim_feedforward=64",
-            "--policy.n_encoder_layers=1",
-            "--policy.n_decoder_layers=1",
+            *TINY_ACT,
             "--policy.n_vae_encoder_layers=1",
             "--policy.chunk_size=10",
             "--policy.n_action_steps=10",
