@@ -173,3 +173,14 @@ def test_the_cli_answers_help_and_refuses_a_missing_directory(tmp_path, capsys):
     with pytest.raises(SystemExit) as done:
         check_main([str(tmp_path / "nothing")])
     assert done.value.code == 2
+
+
+def test_the_converter_skips_the_check_with_no_check(tmp_path):
+    episode_bag(tmp_path / "bags" / "episode_000000")
+    out = io.StringIO()
+    with redirect_stdout(out):
+        status = convert_main([str(tmp_path / "bags"), "--output", str(tmp_path / "ds"), "--quiet", "--no-videos", "--no-check"])
+    assert status == 0, out.getvalue()
+    assert "check " not in out.getvalue() and out.getvalue().startswith("1 episode(s)")
+    # A dataset of images, not videos, is checked clean too.
+    assert findings_of(tmp_path / "ds") == []
