@@ -297,10 +297,9 @@ def convert(args) -> int:
             converted += 1
             successful += bool(frames.success[-1])  # the verdict of the episode (its last frame)
             frames_written += len(frames.state)
+    check_status = 0
     if dataset is not None:
         dataset.finalize()
-        if args.push_to_hub:
-            dataset.push_to_hub(private=args.private)
     seconds = time.monotonic() - started
     summary = (
         f"{converted} episode(s) ({successful} successful), {frames_written} frames at {args.fps} fps -> {args.output} "
@@ -311,7 +310,18 @@ def convert(args) -> int:
         print(f"  note: {note}")
     for reason in skipped:
         print(f"  skipped: {reason}")
-    return 0 if converted else 1
+    if dataset is not None and not args.no_check:
+        # What LeRobot will read, checked once it is all on disk (so101.dataset_check).
+        from .dataset_check import run as check_dataset
+
+        sys.stdout.flush()
+        check_status = check_dataset(args.output, quiet=args.quiet)
+    if dataset is not None and args.push_to_hub:
+        if check_status:
+            log.error("not pushed to the Hub: the dataset check found problems (--no-check skips it)")
+        else:
+            dataset.push_to_hub(private=args.private)
+    return 0 if converted and not check_status else 1
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -354,6 +364,11 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--sequential-encoding", action="store_true", help="encode one camera's video at a time")
     parser.add_argument("--push-to-hub", action="store_true", help="upload the dataset to the Hugging Face Hub (--repo-id)")
     parser.add_argument("--private", action="store_true", help="with --push-to-hub: a private repo")
+    parser.add_argument(
+        "--no-check",
+        action="store_true",
+        help="skip the check of the written dataset (so101-dataset-check: timestamps, videos, NaN, lengths, stats)",
+    )
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
     args = parser.parse_args(argv)
     if args.fps <= 0:
