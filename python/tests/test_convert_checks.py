@@ -149,3 +149,18 @@ def test_only_bad_episodes_fail_without_a_dataset(tmp_path, capsys):
     assert "episode_000000: malformed metadata.yaml (rosbag2_bagfile_information is not a mapping)" in summary
     assert "episode_000001: no valid /joint_commands or /forward_position_controller/commands (action) (1 rejected" in summary
     assert not output.exists()
+
+
+def test_a_camera_too_narrow_for_the_video_encoder_is_skipped_not_a_crash(tmp_path):
+    import io
+    from contextlib import redirect_stdout
+
+    bags = tmp_path / "bags"
+    simple_episode(bags / "episode_000000", width=16).close()  # SVT-AV1 crashes on 16 px wide frames
+    out = io.StringIO()
+    with redirect_stdout(out):
+        status = main([str(bags), "--output", str(tmp_path / "dataset"), "--quiet", "--repo-id", "local/narrow"])
+    assert status == 1, out.getvalue()
+    assert "narrower than 32 px" in out.getvalue() and "--image-size or --no-videos" in out.getvalue()
+    with pytest.raises(SystemExit):
+        main([str(bags), "--output", str(tmp_path / "other"), "--image-size", "16x12"])

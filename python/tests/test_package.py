@@ -33,7 +33,16 @@ def test_camera_topics_follow_the_contract():
 
 
 @pytest.mark.parametrize(
-    "tool", ["so101-bag-to-lerobot", "so101-replay", "so101-run-policy", "so101-launch", "so101-bench", "so101-watch-sim"]
+    "tool",
+    [
+        "so101-bag-to-lerobot",
+        "so101-replay",
+        "so101-run-policy",
+        "so101-launch",
+        "so101-bench",
+        "so101-watch-sim",
+        "so101-dataset-check",
+    ],
 )
 def test_every_console_entry_point_answers_help(tool):
     done = subprocess.run([str(Path(sys.executable).parent / tool), "--help"], capture_output=True, text=True, timeout=120)

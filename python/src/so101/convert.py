@@ -164,6 +164,11 @@ def features_for(cameras: dict[str, tuple[int, int]], use_videos: bool, environm
     return features
 
 
+# SVT-AV1 3.0 (LeRobot's video encoder) dies with SIGFPE on frames under ~26 px wide (24 crashes,
+# 28 encodes; the height does not matter): measured with PyAV, so narrower episodes are refused.
+MIN_VIDEO_WIDTH = 32
+
+
 def resized(images: list[np.ndarray], width: int, height: int) -> list[np.ndarray]:
     """The frames scaled to width x height (area averaging when shrinking, as for a small policy's input)."""
     from PIL import Image
@@ -255,6 +260,15 @@ def convert(args) -> int:
             continue
         for label, task, frames in all_frames:
             shapes = {name: images[0].shape[:2] for name, images in frames.images.items()}
+            narrow = {name: width for name, (_, width) in shapes.items() if width < MIN_VIDEO_WIDTH}
+            if narrow and not args.no_videos:
+                error = (
+                    f"{label}: camera(s) {narrow} narrower than {MIN_VIDEO_WIDTH} px, which the AV1 video encoder "
+                    "(SVT-AV1) cannot encode (it crashes the process): --image-size or --no-videos"
+                )
+                log.warning("skipped %s", error)
+                skipped.append(error)
+                continue
             if dataset is None:
                 cameras = list(shapes)
                 dataset = LeRobotDataset.create(
@@ -373,6 +387,8 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     if args.fps <= 0:
         parser.error("--fps must be positive")
+    if args.image_size and args.image_size[0] < MIN_VIDEO_WIDTH and not args.no_videos:
+        parser.error(f"--image-size: videos need a width of at least {MIN_VIDEO_WIDTH} px (or --no-videos)")
     if not args.max_gap > 0:
         parser.error("--max-gap must be positive")
     logging.basicConfig(level=logging.INFO, format="%(levelname)s %(name)s: %(message)s")
