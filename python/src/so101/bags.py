@@ -129,7 +129,7 @@ def read_episode(path: Path, cameras: list[str] | None) -> Episode:
                 for _schema, channel, message, ros in reader.iter_decoded_messages(log_time_order=True):
                     received = message.log_time * 1e-9
                     topic = channel.topic
-                    if topic.endswith("/joint_states") and not topic.endswith("leader/joint_states"):
+                    if topic.endswith("/" + contract.JOINT_STATES) and not topic.endswith(contract.LEADER_JOINT_STATES):
                         positions = joint_positions(ros)
                         if positions is not None:
                             raw_states.append((received, _stamp(ros.header), positions))
@@ -146,13 +146,13 @@ def read_episode(path: Path, cameras: list[str] | None) -> Episode:
                         except CommandError as error:
                             targets = f"{topic}: {error}"
                         raw_commands.append((received, int(array), targets))
-                    elif topic.endswith("/task/reward"):
+                    elif topic.endswith("/" + contract.TASK_REWARD):
                         raw_reward.append((received, float(ros.data)))
-                    elif topic.endswith("/task/success"):
+                    elif topic.endswith("/" + contract.TASK_SUCCESS):
                         raw_success.append((received, bool(ros.data)))
                     elif topic.endswith("/" + contract.CUBE_POSE):
                         raw_cube.append((_stamp(ros.header), cube_pose_vector(ros.pose)))
-                    elif "/camera/" in topic and topic.endswith("/image_raw"):
+                    elif f"/{contract.CAMERA_PREFIX}/" in topic and topic.endswith("/" + contract.IMAGE_RAW):
                         name = topic.rstrip("/").split("/")[-2]
                         if cameras is not None and name not in cameras:
                             continue

@@ -25,7 +25,7 @@ import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
 
-from . import process
+from . import contract, process
 from .messages import joint_positions, rgb_image
 from .paths import node_binary, node_environment
 from .units import JOINT_LIMITS, JOINT_NAMES
@@ -83,15 +83,15 @@ class So101SimEnv(gym.Env):
 
             return callback
 
-        self._node.create_subscription(JointState, f"{ns}/joint_states", keep("state"), 10)
-        self._node.create_subscription(PoseStamped, f"{ns}/cube/pose", keep("cube"), 10)
-        self._node.create_subscription(Float64, f"{ns}/task/reward", keep("reward"), 10)
-        self._node.create_subscription(Bool, f"{ns}/task/success", keep("success"), 10)
+        self._node.create_subscription(JointState, f"{ns}/{contract.JOINT_STATES}", keep("state"), 10)
+        self._node.create_subscription(PoseStamped, f"{ns}/{contract.CUBE_POSE}", keep("cube"), 10)
+        self._node.create_subscription(Float64, f"{ns}/{contract.TASK_REWARD}", keep("reward"), 10)
+        self._node.create_subscription(Bool, f"{ns}/{contract.TASK_SUCCESS}", keep("success"), 10)
         for name in self._cameras:
-            self._node.create_subscription(Image, f"{ns}/camera/{name}/image_raw", keep(f"camera/{name}"), 10)
-        self._commands = self._node.create_publisher(JointState, f"{ns}/joint_commands", 10)
-        self._step_client = self._node.create_client(Trigger, f"{ns}/sim/step")
-        self._reset_client = self._node.create_client(Trigger, f"{ns}/sim/reset")
+            self._node.create_subscription(Image, f"{ns}/{contract.camera_topic(name)}", keep(f"camera/{name}"), 10)
+        self._commands = self._node.create_publisher(JointState, f"{ns}/{contract.JOINT_COMMANDS}", 10)
+        self._step_client = self._node.create_client(Trigger, f"{ns}/{contract.SIM_STEP}")
+        self._reset_client = self._node.create_client(Trigger, f"{ns}/{contract.SIM_RESET}")
         self._trigger = Trigger.Request
         self._head_start = 0.002  # s between a command and its step call, doubled when one is late
         self._sent = 0  # commands published to the current sim

@@ -14,6 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
+from . import contract
 from .rclpy_wait import spin_until
 from .units import JOINT_NAMES, radians_from_lerobot
 
@@ -69,9 +70,9 @@ def main(argv: list[str] | None = None) -> int:
     prefix = "/" + args.namespace.strip("/") if args.namespace.strip("/") else ""
     rclpy.init()
     node = rclpy.create_node("so101_replay")
-    publisher = node.create_publisher(JointState, f"{prefix}/joint_commands", 10)
+    publisher = node.create_publisher(JointState, f"{prefix}/{contract.JOINT_COMMANDS}", 10)
     latest: dict = {}
-    node.create_subscription(JointState, f"{prefix}/joint_states", lambda m: latest.__setitem__("state", m), 10)
+    node.create_subscription(JointState, f"{prefix}/{contract.JOINT_STATES}", lambda m: latest.__setitem__("state", m), 10)
 
     def wait_for(predicate, timeout: float, what: str):
         if not spin_until(node, predicate, timeout):
@@ -79,7 +80,7 @@ def main(argv: list[str] | None = None) -> int:
 
     try:
         if args.reset:
-            client = node.create_client(Trigger, f"{prefix}/sim/reset")
+            client = node.create_client(Trigger, f"{prefix}/{contract.SIM_RESET}")
             wait_for(client.service_is_ready, 20.0, "/sim/reset service")
             future = client.call_async(Trigger.Request())
             wait_for(future.done, 10.0, "/sim/reset answer")

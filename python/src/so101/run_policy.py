@@ -25,6 +25,7 @@ from pathlib import Path
 
 import numpy as np
 
+from . import contract
 from .messages import cube_pose_vector, joint_positions, rgb_image
 from .policy import PolicyError, StackPolicy
 from .rclpy_wait import spin_until
@@ -50,10 +51,10 @@ class LiveInputs:
         self.frames: dict[str, tuple[float, object]] = {}
         if cube_pose:
             node.create_subscription(
-                PoseStamped, f"{prefix}/cube/pose", lambda msg: setattr(self, "cube", (time.monotonic(), msg)), 10
+                PoseStamped, f"{prefix}/{contract.CUBE_POSE}", lambda msg: setattr(self, "cube", (time.monotonic(), msg)), 10
             )
         # Best effort matches reliable and best-effort writers; only the newest message matters.
-        node.create_subscription(JointState, f"{prefix}/joint_states", self._on_state, qos_profile_sensor_data)
+        node.create_subscription(JointState, f"{prefix}/{contract.JOINT_STATES}", self._on_state, qos_profile_sensor_data)
         for name, topic in cameras.items():
             node.create_subscription(Image, topic, lambda msg, name=name: self._on_frame(name, msg), qos_profile_sensor_data)
 
@@ -83,19 +84,19 @@ def run_live(args, policy: StackPolicy) -> int:
     from std_srvs.srv import Trigger
 
     prefix = "/" + args.namespace.strip("/") if args.namespace.strip("/") else ""
-    topics = {camera.name: f"{prefix}/camera/{camera.name}/image_raw" for camera in policy.cameras}
+    topics = {camera.name: f"{prefix}/{contract.camera_topic(camera.name)}" for camera in policy.cameras}
     topics.update(dict(item.split("=", 1) for item in args.camera))
     rclpy.init()
     node = rclpy.create_node("so101_policy_runner")
     inputs = LiveInputs(node, prefix, topics, cube_pose=policy.needs_environment_state)
-    commands = node.create_publisher(JointState, f"{prefix}/joint_commands", 10)
+    commands = node.create_publisher(JointState, f"{prefix}/{contract.JOINT_COMMANDS}", 10)
     camera_names = [camera.name for camera in policy.cameras]
     period = 1.0 / args.fps
     steps = late = held = 0
     inference: list[float] = []
     try:
         if args.reset:
-            client = node.create_client(Trigger, f"{prefix}/sim/reset")
+            client = node.create_client(Trigger, f"{prefix}/{contract.SIM_RESET}")
             if not spin_until(node, client.service_is_ready, 20.0):
                 raise SystemExit(f"so101-run-policy: no {prefix}/sim/reset service within 20 s")
             future = client.call_async(Trigger.Request())

@@ -30,6 +30,7 @@ import subprocess
 import sys
 import time
 
+from so101 import contract
 from so101.contract import JOINT_NAMES
 from so101.isolation import network_namespace_problem
 from so101.paths import node_binary, node_environment, repo_root
@@ -214,8 +215,8 @@ def run_node(args) -> dict:
     executor = SingleThreadedExecutor()
     executor.add_node(node)
     arrivals: list[float] = []
-    node.create_subscription(JointState, f"{ns}/joint_states", lambda _msg: arrivals.append(time.perf_counter()), 10)
-    pub = node.create_publisher(JointState, f"{ns}/joint_commands", 10)
+    node.create_subscription(JointState, f"{ns}/{contract.JOINT_STATES}", lambda _msg: arrivals.append(time.perf_counter()), 10)
+    pub = node.create_publisher(JointState, f"{ns}/{contract.JOINT_COMMANDS}", 10)
     latencies: list[float] = []
     lost = 0
     try:

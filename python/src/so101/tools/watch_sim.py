@@ -17,7 +17,7 @@ from rclpy.node import Node
 from sensor_msgs.msg import Image, JointState
 from std_msgs.msg import Bool, Float64
 
-from so101 import process
+from so101 import contract, process
 from so101.contract import CAMERA_NAMES
 from so101.paths import node_environment
 
@@ -40,14 +40,14 @@ class Watcher(Node):
         self.reward = None
         self.success = False
         self.successes = 0
-        self.create_subscription(JointState, "/joint_states", self._on_joints, 10)
-        self.create_subscription(PoseStamped, "/cube/pose", self._on_cube, 10)
-        self.create_subscription(Float64, "/task/reward", self._on_reward, 10)
-        self.create_subscription(Bool, "/task/success", self._on_success, 10)
+        self.create_subscription(JointState, f"/{contract.JOINT_STATES}", self._on_joints, 10)
+        self.create_subscription(PoseStamped, f"/{contract.CUBE_POSE}", self._on_cube, 10)
+        self.create_subscription(Float64, f"/{contract.TASK_REWARD}", self._on_reward, 10)
+        self.create_subscription(Bool, f"/{contract.TASK_SUCCESS}", self._on_success, 10)
         self.frames = {name: 0 for name in CAMERAS}
         self.frames_at_last_line = dict(self.frames)
         for name in CAMERAS:
-            self.create_subscription(Image, f"/camera/{name}/image_raw", lambda _msg, n=name: self._on_frame(n), 2)
+            self.create_subscription(Image, f"/{contract.camera_topic(name)}", lambda _msg, n=name: self._on_frame(n), 2)
 
     def _on_frame(self, name):
         self.frames[name] += 1
