@@ -6,6 +6,8 @@ pub mod cli_values;
 pub mod command;
 pub mod contract;
 pub mod episode_bag;
+pub mod expert;
 pub mod kinematics;
 pub mod robot;
+#[cfg(feature = "ros")]
 pub mod ros;

@@ -63,6 +63,16 @@ pub fn joint_index(name: &str) -> Option<usize> {
 /// Positions of all joints, in [`JOINT_NAMES`] order.
 pub type JointPositions = [f64; JOINT_COUNT];
 
+/// Targets for an absolute joint request (leader arm, expert), clamped to the limits and moved at
+/// most `max_step` rad per joint from the current targets, so a jump never reaches a motor at once.
+pub fn follow(targets: &JointPositions, wanted: &JointPositions, max_step: f64) -> JointPositions {
+    std::array::from_fn(|joint| {
+        let wanted = JOINT_LIMITS[joint].clamp(wanted[joint]);
+        let step = (wanted - targets[joint]).clamp(-max_step, max_step);
+        JOINT_LIMITS[joint].clamp(targets[joint] + step)
+    })
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -4,12 +4,13 @@ use std::path::PathBuf;
 
 use so101_core::ros::NodeArgs;
 
-use crate::{
+use so101_sim::{
     cameras::spec::{self, CameraList, FrameSize},
     offscreen::RendererChoice,
-    pacing::{self, TimeMode},
     task::TaskKind,
 };
+
+use crate::pacing::{self, TimeMode};
 
 /// MuJoCo simulation of the SO-101 arm with a cube-to-bin task, publishing /joint_states and
 /// obeying /joint_commands like the physical arm's driver.
@@ -40,6 +41,11 @@ pub struct Args {
     /// Advance one control period per /sim/step call and never by itself (deterministic evaluation, RL).
     #[arg(long)]
     pub lockstep: bool,
+    /// With --lockstep: every valid /joint_commands message also advances one control period,
+    /// and the state it leads to is published before the next command is taken (one message,
+    /// one step, in order; no /sim/step call needed; a rejected command advances nothing).
+    #[arg(long, requires = "lockstep")]
+    pub step_on_command: bool,
     /// Play the built-in pick-and-place demo until the first external command arrives.
     #[arg(long)]
     pub demo: bool,

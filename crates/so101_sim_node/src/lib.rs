@@ -1,17 +1,11 @@
-//! The SO-101 arm and its cube-to-bin scene in MuJoCo, behind the ROS 2 topic contract.
+//! The ROS 2 front door of the simulated SO-101 (so101_sim): the topic contract, services,
+//! camera topics and wall-clock pacing around the simulation core.
 //!
-//! Pure logic (task scoring, cube placement, pacing, the demo script, the lite scene transform) is
-//! apart from the two I/O sides: MuJoCo (`mujoco`, `world`) and ROS (`ros_io`); `run` joins them.
+//! Pure logic (pacing, the CLI's parsing) is apart from the I/O side (`ros_io`, `cameras`); `run`
+//! joins them with so101_sim's task environment.
 
 pub mod cameras;
 pub mod cli;
-pub mod demo;
-pub mod mujoco;
-pub mod offscreen;
 pub mod pacing;
-pub mod placement;
 pub mod ros_io;
 pub mod run;
-pub mod scene;
-pub mod task;
-pub mod world;

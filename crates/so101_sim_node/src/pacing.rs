@@ -30,14 +30,6 @@ pub fn parse_speed(text: &str) -> Result<TimeMode, String> {
     }
 }
 
-/// Number of physics steps in control period `index` (counting from 0) so that period k ends at the
-/// step nearest to (k + 1) * period: rates that do not divide the physics rate (30 Hz on 2 ms
-/// steps) alternate between neighbouring step counts instead of drifting.
-pub fn steps_in_period(index: u64, period: f64, timestep: f64) -> u64 {
-    let end_step = |k: u64| (k as f64 * period / timestep).round() as u64;
-    end_step(index + 1) - end_step(index)
-}
-
 /// When falling behind by more than this, the pacer stops trying to catch up (a stall of the
 /// machine should not be followed by a burst of fast-forwarded physics).
 const MAX_LAG: Duration = Duration::from_millis(200);
@@ -92,17 +84,6 @@ impl Pacer {
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    #[test]
-    fn periods_follow_the_control_rate_without_drift() {
-        assert!((0..1000).all(|k| steps_in_period(k, 0.01, 0.002) == 5));
-        let thirty_hz: Vec<u64> = (0..3000)
-            .map(|k| steps_in_period(k, 1.0 / 30.0, 0.002))
-            .collect();
-        assert!(thirty_hz.iter().all(|steps| *steps == 16 || *steps == 17));
-        // After 100 s exactly 50000 steps: no drift.
-        assert_eq!(thirty_hz.iter().sum::<u64>(), 50_000);
-    }
 
     #[test]
     fn parses_speed_factors_and_max() {

@@ -28,7 +28,7 @@ use so101_msgs::{
     std_srvs::{Trigger, TriggerRequest, TriggerResponse},
 };
 
-use crate::{
+use so101_sim::{
     cameras::rig::RigDiagnostics,
     world::{ArmState, CubePose},
 };

@@ -9,23 +9,18 @@ use std::{
 use anyhow::{Context, Result};
 use so101_core::ros::{command_inbox::CommandInbox, shutdown::Shutdown, RosNode};
 
-use crate::{
+use so101_sim::{
     cameras::rig::{CameraRig, RigOptions},
-    cli::Args,
     demo::{Script, PICK_AND_PLACE},
-    mujoco,
-    pacing::{Pacer, TimeMode},
-    placement::{CubePlacer, SpawnArea},
-    ros_io::{Frame, FramePublisher, NodeDiagnostics, PendingCall, SimServices},
-    scene, task,
-    world::World,
+    env::{TaskEnv, TaskSettings},
+    mujoco, scene,
 };
 
-/// Where /sim/reset may put the cube (world frame, m): every point was picked into the bin by a
-/// scripted grasp in this scene, and it stays at least 6.5 cm clear of the bin.
-pub const CUBE_SPAWN_AREA: SpawnArea = SpawnArea {
-    x: (0.18, 0.28),
-    y: (-0.08, 0.08),
+use crate::{
+    cameras::publish::{publish_batches, CameraTopics},
+    cli::Args,
+    pacing::{Pacer, TimeMode},
+    ros_io::{Frame, FramePublisher, NodeDiagnostics, PendingCall, SimServices},
 };
 
 /// Seconds of sim time between two /diagnostics messages.
@@ -38,14 +33,21 @@ const MAX_SPEED_INTAKE_PERIOD: Duration = Duration::from_micros(500);
 /// Longest single sleep of the loop, so shutdown and commands are noticed within it.
 const MAX_SLEEP: Duration = Duration::from_millis(50);
 
-/// How often lockstep mode looks for /sim/step calls while idle.
-const LOCKSTEP_POLL: Duration = Duration::from_micros(100);
+/// How often lockstep mode looks for commands and /sim/step calls: briefly while a client is
+/// stepping (each wait adds to every step's round trip), slowly once it has been idle a while.
+const LOCKSTEP_POLL_BUSY: Duration = Duration::from_micros(20);
+const LOCKSTEP_POLL_IDLE: Duration = Duration::from_millis(1);
+const LOCKSTEP_BUSY_FOR: Duration = Duration::from_millis(200);
 
 /// Loads the scene, starts the node and runs the loop until a signal or `--duration`.
 pub fn run(args: Args) -> Result<()> {
     let simulation = scene::load(&args.scene, args.lite)?;
-    let mut world =
-        World::new(simulation, 1.0 / args.rate).context("the scene does not fit the node")?;
+    let settings = TaskSettings {
+        kind: args.task,
+        dense_reward: args.dense_reward,
+    };
+    let env = TaskEnv::new(simulation, args.rate, settings, args.seed)
+        .context("the scene does not fit the node")?;
     let time_mode = if args.lockstep {
         TimeMode::Lockstep
     } else {
@@ -57,7 +59,7 @@ pub fn run(args: Args) -> Result<()> {
         lite = args.lite,
         task = ?args.task,
         rate_hz = args.rate,
-        timestep = world.timestep(),
+        timestep = env.world().timestep(),
         mode = ?time_mode,
         "simulation ready"
     );
@@ -66,24 +68,23 @@ pub fn run(args: Args) -> Result<()> {
     let publisher = FramePublisher::start(&mut node)?;
     let inbox = CommandInbox::subscribe(&mut node)?;
     let services = SimServices::serve(&mut node)?;
-    let cameras = start_cameras(&args, time_mode, &mut world, &mut node)?;
+    let cameras = start_cameras(&args, time_mode, &env, &mut node)?;
     let pacer = Pacer::new(
         match time_mode {
             TimeMode::Scaled { speed } => Some(speed),
             TimeMode::Max | TimeMode::Lockstep => None,
         },
-        world.time(),
+        env.world().time(),
         Instant::now(),
     );
     let mut control = SimLoop {
-        placer: CubePlacer::new(CUBE_SPAWN_AREA, args.seed),
         demo: args.demo.then(|| Script::new(&PICK_AND_PLACE)),
-        demo_start: world.time(),
-        next_diagnostics: world.time(),
+        demo_start: env.world().time(),
+        next_diagnostics: env.world().time(),
         diagnostics: NodeDiagnostics::default(),
         args,
         time_mode,
-        world,
+        env,
         publisher,
         inbox,
         services,
@@ -95,42 +96,50 @@ pub fn run(args: Args) -> Result<()> {
     Ok(())
 }
 
-/// The camera rig of `--cameras` (none for "none").
+/// The camera rig of `--cameras` (none for "none"), its frames published on the camera topics.
 fn start_cameras(
     args: &Args,
     time_mode: TimeMode,
-    world: &mut World,
+    env: &TaskEnv,
     node: &mut RosNode,
 ) -> Result<Option<CameraRig>> {
     let specs = args.cameras.resolve(args.camera_size, args.camera_rate);
     if specs.is_empty() {
         return Ok(None);
     }
-    let time = world.time();
+    let sim = env.world().simulation();
+    let intrinsics = CameraRig::intrinsics(sim, &specs)?;
+    let topics = specs
+        .iter()
+        .zip(intrinsics)
+        .map(|(spec, intrinsics)| CameraTopics::advertise(node, &spec.name, intrinsics, args.jpeg))
+        .collect::<Result<Vec<_>, _>>()?;
+    let jpeg_quality = args.jpeg_quality;
     let options = RigOptions {
         renderer: args.renderer,
         show_collision_geoms: args.lite,
         shadows: args.camera_shadows,
-        jpeg_quality: args.jpeg.then_some(args.jpeg_quality),
         // Only real time may skip frames; every other mode renders each at its sim-time instant.
         wait_for_renderer: time_mode != TimeMode::Scaled { speed: 1.0 },
     };
-    CameraRig::start(world.simulation_mut(), node, specs, options, time)
-        .map(Some)
-        .context("cannot start the cameras")
+    let rig = CameraRig::start(sim, specs, options, env.world().time(), move |batches| {
+        publish_batches(&topics, jpeg_quality, &batches)
+    })
+    .context("cannot start the cameras")?;
+    tracing::info!(jpeg = args.jpeg, "camera topics advertised");
+    Ok(Some(rig))
 }
 
 struct SimLoop {
     args: Args,
     time_mode: TimeMode,
-    // Before `world`: the rig (its render thread) goes before the model it was made from.
+    // Before `env`: the rig's render thread ends before the simulation it draws goes.
     cameras: Option<CameraRig>,
-    world: World,
+    env: TaskEnv,
     publisher: FramePublisher,
     inbox: CommandInbox,
     services: SimServices,
     pacer: Pacer,
-    placer: CubePlacer,
     demo: Option<Script>,
     demo_start: f64,
     diagnostics: NodeDiagnostics,
@@ -145,14 +154,20 @@ impl SimLoop {
         // are waited for in every mode (the renderer's first draw is slow); then the clocks start.
         if self.cameras.is_some() {
             wait_until_published(self.capture_every_frame());
-            self.pacer.restart(self.world.time(), Instant::now());
+            self.pacer.restart(self.env.world().time(), Instant::now());
         }
         let deadline = self
             .args
             .duration
             .map(|seconds| Instant::now() + Duration::from_secs_f64(seconds.max(0.0)));
-        let started = (Instant::now(), self.world.time(), self.world.total_steps());
+        let started = (
+            Instant::now(),
+            self.env.world().time(),
+            self.env.world().total_steps(),
+        );
         let mut last_intake = started.0 - MAX_SPEED_INTAKE_PERIOD;
+        let mut last_lockstep_work = started.0;
+        let commands_step = self.time_mode == TimeMode::Lockstep && self.args.step_on_command;
         self.publish(None);
         while !shutdown.is_requested() && deadline.is_none_or(|deadline| Instant::now() < deadline)
         {
@@ -160,11 +175,23 @@ impl SimLoop {
                 self.time_mode != TimeMode::Max || last_intake.elapsed() >= MAX_SPEED_INTAKE_PERIOD;
             if intake_due {
                 last_intake = Instant::now();
-                self.apply_commands();
+                if !commands_step {
+                    self.apply_commands();
+                }
                 self.serve_resets();
             }
             if self.time_mode == TimeMode::Lockstep {
-                self.serve_steps();
+                let stepped = (commands_step && self.serve_command_steps()) | self.serve_steps();
+                if stepped {
+                    last_lockstep_work = Instant::now();
+                } else {
+                    self.publisher.flush();
+                    std::thread::sleep(if last_lockstep_work.elapsed() < LOCKSTEP_BUSY_FOR {
+                        LOCKSTEP_POLL_BUSY
+                    } else {
+                        LOCKSTEP_POLL_IDLE
+                    });
+                }
                 continue;
             }
             if intake_due {
@@ -179,10 +206,10 @@ impl SimLoop {
         }
         self.publisher.flush();
         let wall_seconds = started.0.elapsed().as_secs_f64();
-        let physics_steps = self.world.total_steps() - started.2;
+        let physics_steps = self.env.world().total_steps() - started.2;
         tracing::info!(
-            sim_time = self.world.time(),
-            sim_seconds_run = self.world.time() - started.1,
+            sim_time = self.env.world().time(),
+            sim_seconds_run = self.env.world().time() - started.1,
             wall_seconds,
             physics_steps,
             steps_per_second = physics_steps as f64 / wall_seconds,
@@ -209,21 +236,20 @@ impl SimLoop {
         if !commands.is_empty() && self.demo.take().is_some() {
             tracing::info!("external command received: demo stopped");
         }
-        let limits = *self.world.limits();
+        let limits = *self.env.world().limits();
         for targets in commands {
-            targets.apply_clamped(self.world.targets_mut(), &limits);
+            targets.apply_clamped(self.env.world_mut().targets_mut(), &limits);
         }
     }
 
     fn serve_resets(&mut self) {
         while let Some(call) = self.services.next_reset() {
-            let start = self.placer.next_start();
-            self.world.reset(Some(start));
+            let start = self.env.reset(None);
             if let Some(rig) = &mut self.cameras {
-                rig.restart(self.world.time());
+                rig.restart(self.env.world().time());
             }
             self.diagnostics.episode += 1;
-            self.demo_start = self.world.time();
+            self.demo_start = self.env.world().time();
             tracing::info!(
                 episode = self.diagnostics.episode,
                 x = start.x,
@@ -240,27 +266,25 @@ impl SimLoop {
             let frames = self.capture_every_frame();
             self.publish_and_wait(None);
             wait_until_published(frames);
-            self.pacer.restart(self.world.time(), Instant::now());
+            self.pacer.restart(self.env.world().time(), Instant::now());
             self.services.answer_reset(call, true, message);
         }
     }
 
     /// Lockstep: one control period per /sim/step call, answered once its state is published.
-    fn serve_steps(&mut self) {
+    /// False when there was no call.
+    fn serve_steps(&mut self) -> bool {
         let calls: Vec<PendingCall> = std::iter::from_fn(|| self.services.next_step()).collect();
         if calls.is_empty() {
-            self.publisher.flush();
-            std::thread::sleep(LOCKSTEP_POLL);
-            return;
+            return false;
         }
         for call in calls {
             // A command sent before this /sim/step call must act in this very step.
-            self.apply_commands();
-            let report = self.advance_period();
-            let frames = self.capture_frames(true);
-            self.publish_and_wait(report);
-            wait_until_published(frames);
-            let time = self.world.time();
+            if !self.args.step_on_command {
+                self.apply_commands();
+            }
+            self.step_and_publish();
+            let time = self.env.world().time();
             self.services.answer_step(
                 call,
                 true,
@@ -268,6 +292,34 @@ impl SimLoop {
                 format!("t={time:.6} commands={}", self.inbox.tally.accepted),
             );
         }
+        true
+    }
+
+    /// Lockstep with --step-on-command: each valid command, in order, becomes the targets of one
+    /// control period whose state is published before the next command is taken. False when no
+    /// command came.
+    fn serve_command_steps(&mut self) -> bool {
+        let commands = self.inbox.drain();
+        if commands.is_empty() {
+            return false;
+        }
+        if self.demo.take().is_some() {
+            tracing::info!("external command received: demo stopped");
+        }
+        let limits = *self.env.world().limits();
+        for targets in commands {
+            targets.apply_clamped(self.env.world_mut().targets_mut(), &limits);
+            self.step_and_publish();
+        }
+        true
+    }
+
+    /// One control period, its state (and camera frames) on the wire before this returns.
+    fn step_and_publish(&mut self) {
+        let report = self.advance_period();
+        let frames = self.capture_frames(true);
+        self.publish_and_wait(report);
+        wait_until_published(frames);
     }
 
     fn refuse_steps(&mut self) {
@@ -280,7 +332,7 @@ impl SimLoop {
     /// Sleeps until the next period may run; false when it slept only part of the way (long waits
     /// are cut into slices so a signal or a command is not kept waiting).
     fn wait_for_wall_clock(&mut self) -> bool {
-        let period_end = self.world.time() + 1.0 / self.args.rate;
+        let period_end = self.env.world().time() + 1.0 / self.args.rate;
         let wait = self.pacer.wait_before(period_end, Instant::now());
         if wait.is_zero() {
             return true;
@@ -294,22 +346,23 @@ impl SimLoop {
     /// Runs the physics for one control period; returns the diagnostics when they are due.
     fn advance_period(&mut self) -> Option<NodeDiagnostics> {
         if let Some(script) = &self.demo {
-            if self.world.time() - self.demo_start > script.duration() {
-                self.world.reset(None);
-                self.demo_start = self.world.time();
+            if self.env.world().time() - self.demo_start > script.duration() {
+                self.env.world_mut().reset(None);
+                self.demo_start = self.env.world().time();
             }
-            *self.world.targets_mut() = script.targets_at(self.world.time() - self.demo_start);
+            *self.env.world_mut().targets_mut() =
+                script.targets_at(self.env.world().time() - self.demo_start);
         }
-        if !self.world.advance() {
+        if !self.env.advance() {
             self.diagnostics.physics_divergences += 1;
             tracing::warn!(
                 "the physics diverged (MuJoCo reset its state); the episode restarted from its start"
             );
         }
-        if self.world.time() + 1e-9 < self.next_diagnostics {
+        if self.env.world().time() + 1e-9 < self.next_diagnostics {
             return None;
         }
-        self.next_diagnostics = self.world.time() + DIAGNOSTICS_PERIOD;
+        self.next_diagnostics = self.env.world().time() + DIAGNOSTICS_PERIOD;
         self.diagnostics.accepted_commands = self.inbox.tally.accepted;
         self.diagnostics.rejected_commands = self.inbox.tally.rejected;
         self.diagnostics.pacing_resyncs = self.pacer.resyncs;
@@ -321,8 +374,8 @@ impl SimLoop {
     /// than skips), the answer fires once they are published.
     fn capture_frames(&mut self, notify: bool) -> Option<std::sync::mpsc::Receiver<()>> {
         let rig = self.cameras.as_mut()?;
-        let time = self.world.time();
-        rig.capture(self.world.simulation_mut(), time, notify)
+        let time = self.env.world().time();
+        rig.capture(self.env.world_mut().simulation_mut(), time, notify)
             .published()
     }
 
@@ -330,8 +383,8 @@ impl SimLoop {
     /// for it in every mode; the answer fires once they are published.
     fn capture_every_frame(&mut self) -> Option<std::sync::mpsc::Receiver<()>> {
         let rig = self.cameras.as_mut()?;
-        let time = self.world.time();
-        rig.capture_and_wait(self.world.simulation_mut(), time)
+        let time = self.env.world().time();
+        rig.capture_and_wait(self.env.world_mut().simulation_mut(), time)
             .published()
     }
 
@@ -352,14 +405,13 @@ impl SimLoop {
         diagnostics: Option<NodeDiagnostics>,
         published: Option<std::sync::mpsc::SyncSender<()>>,
     ) -> Frame {
-        let observation = self.world.task_observation();
-        let outcome = task::evaluate(self.args.task, self.args.dense_reward, &observation);
+        let observation = self.env.observe();
         Frame {
-            sim_time: self.world.time(),
-            arm: self.world.arm_state(),
-            reward: outcome.reward,
-            success: outcome.success,
-            cube: self.world.cube_pose(),
+            sim_time: observation.time,
+            arm: observation.arm,
+            reward: observation.outcome.reward,
+            success: observation.outcome.success,
+            cube: observation.cube,
             diagnostics,
             published,
         }

@@ -125,3 +125,18 @@ fn parse_noise(text: &str) -> Result<f64, String> {
         )),
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use clap::Parser;
+    use so101_core::{expert::SIM_BIN_IN_WORLD, kinematics::SIM_BASE_IN_WORLD};
+
+    use super::Args;
+
+    #[test]
+    fn the_expert_defaults_are_the_sim_scenes() {
+        let args = Args::parse_from(["teleop_node"]);
+        assert_eq!(args.base_xyz, SIM_BASE_IN_WORLD);
+        assert_eq!(args.bin_xyz, SIM_BIN_IN_WORLD);
+    }
+}

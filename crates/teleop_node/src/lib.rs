@@ -2,12 +2,11 @@
 //! arm, scripted expert, scripted file) behind one interface, joint and Cartesian jogging on the
 //! shared kinematics, episode controls, and the node that publishes /joint_commands.
 //!
-//! Pure logic (motion, controls, the expert's planner, key and pad maps) is apart from I/O (the
-//! node, the devices).
+//! Pure logic (motion, controls, key and pad maps; the expert's planner is so101_core::expert) is
+//! apart from I/O (the node, the devices).
 
 pub mod cli;
 pub mod controls;
-pub mod expert;
 pub mod input;
 pub mod motion;
 pub mod node;

@@ -115,19 +115,10 @@ pub fn jog_cartesian(
     }
 }
 
-/// Targets for an absolute joint request (leader arm, expert), clamped to the limits and moved at
-/// most `max_step` rad per joint from the current targets, so a jump never reaches a motor at once.
-pub fn follow(targets: &JointPositions, wanted: &JointPositions, max_step: f64) -> JointPositions {
-    std::array::from_fn(|joint| {
-        let wanted = JOINT_LIMITS[joint].clamp(wanted[joint]);
-        let step = (wanted - targets[joint]).clamp(-max_step, max_step);
-        JOINT_LIMITS[joint].clamp(targets[joint] + step)
-    })
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
+    use so101_core::robot::follow;
 
     const SPEEDS: Speeds = Speeds {
         joint: 1.0,

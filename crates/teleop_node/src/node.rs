@@ -13,6 +13,7 @@ use so101_core::{
     robot::{JointPositions, JOINT_LIMITS, JOINT_NAMES},
     ros::{clock::SimClock, qos, rate_limit::RateLimiter, shutdown::Shutdown, RosNode},
 };
+use so101_core::{expert::ExpertConfig, robot::follow};
 use so101_msgs::{
     geometry_msgs::PoseStamped,
     sensor_msgs::JointState,
@@ -23,12 +24,11 @@ use so101_msgs::{
 use crate::{
     cli::{Args, SourceKind},
     controls::{event_text, recording_after, Control},
-    expert::ExpertConfig,
     input::{
         expert::Expert, gamepad::Gamepad, keyboard::Keyboard, leader::Leader, scripted::Scripted,
         Request, Scene, Source, Tick,
     },
-    motion::{follow, jog_cartesian, jog_joints, Mode, Speeds},
+    motion::{jog_cartesian, jog_joints, Mode, Speeds},
 };
 
 /// How long to wait for /sim/reset to answer before asking again (a request sent before the
@@ -172,15 +172,12 @@ fn open_source(args: &Args, node: &mut RosNode) -> Result<Box<dyn Source>> {
         }
         SourceKind::Expert => {
             let base = Vector3::from(args.base_xyz);
-            let config = ExpertConfig {
-                bin: Vector3::from(args.bin_xyz) - base,
-                table_z: SIM_TABLE_Z - base.z,
-                gripper_open: 0.9,
-                gripper_closed: -0.17,
-                waypoint_noise: args.waypoint_noise,
-                action_noise: args.action_noise,
-                slowness: 1.0,
-            };
+            let config = ExpertConfig::for_scene(
+                base,
+                Vector3::from(args.bin_xyz),
+                args.waypoint_noise,
+                args.action_noise,
+            );
             Box::new(Expert::new(
                 config,
                 base,
@@ -236,9 +233,6 @@ fn next_targets(
         *current
     }
 }
-
-/// Height of the sim scene's table top in its world frame, m.
-const SIM_TABLE_Z: f64 = 0.75;
 
 /// Runs the node until a signal, a quit control, the source's end or --duration.
 pub fn run(args: Args) -> Result<()> {

@@ -9,9 +9,8 @@ use std::time::Instant;
 use anyhow::{bail, Context, Result};
 use clap::Parser;
 use so101_core::ros::logging;
-use so101_sim_node::{
+use so101_sim::{
     cameras::spec::{self, FrameSize},
-    cli,
     mujoco::{
         render::{RenderContext, SceneBuffer, VisualOptions},
         ObjectKind,
@@ -25,7 +24,7 @@ use so101_sim_node::{
 #[command(version, about)]
 struct Args {
     /// MJCF scene to load.
-    #[arg(long, default_value = cli::default_scene())]
+    #[arg(long, default_value = so101_core::robot::DEFAULT_SCENE)]
     scene: std::path::PathBuf,
     /// Mesh-free visual variant (as the node's --lite).
     #[arg(long)]
@@ -62,12 +61,8 @@ fn main() -> Result<()> {
         }
     }
     let FrameSize { width, height } = args.size;
-    let (offscreen_width, offscreen_height) = sim.offscreen_size();
-    sim.set_offscreen_size(offscreen_width.max(width), offscreen_height.max(height));
     let gl = GlContext::create(args.renderer, width, height).context("no OpenGL context")?;
-    let model = sim.model_handle();
-    // Safety: the context is current on this thread and the model lives until the end of main.
-    let mut context = unsafe { RenderContext::new(&model) };
+    let mut context = RenderContext::new(&gl, &sim.render_model(width, height));
     let options = VisualOptions::new(args.lite);
     let mut scene = SceneBuffer::new(&sim, args.shadows);
     let mut rgb = vec![0u8; 3 * width as usize * height as usize];

@@ -1,8 +1,3 @@
-//! Simulated cameras: which ones (spec), when (schedule), what CameraInfo says (intrinsics), how
-//! frames are rendered off the physics thread (rig) and published (publish).
+//! The camera topics of the rendered frames (so101_sim::cameras renders them).
 
-pub mod intrinsics;
 pub mod publish;
-pub mod rig;
-pub mod schedule;
-pub mod spec;

@@ -2,7 +2,7 @@
 //! own thread so that neither rendering nor the physics waits for DDS.
 
 use std::{
-    sync::mpsc::{Receiver, SyncSender},
+    sync::mpsc::Receiver,
     time::{Duration, Instant},
 };
 
@@ -14,22 +14,8 @@ use so101_msgs::{
     std_msgs::Header,
 };
 
-use super::intrinsics::Intrinsics;
 use so101_core::ros::node::NodeError;
-
-/// One rendered frame, rows top-down.
-pub struct RenderedFrame {
-    pub camera: usize,
-    pub rgb: Vec<u8>,
-}
-
-/// Frames of one sim-time instant.
-pub struct FrameBatch {
-    pub sim_time: f64,
-    pub frames: Vec<RenderedFrame>,
-    /// Signalled once every frame is on the wire (lockstep answers /sim/step after that).
-    pub published: Option<SyncSender<()>>,
-}
+use so101_sim::cameras::{intrinsics::Intrinsics, rig::FrameBatch};
 
 /// The publishers and fixed message parts of one camera.
 pub struct CameraTopics {

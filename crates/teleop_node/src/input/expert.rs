@@ -1,18 +1,15 @@
 //! The scripted expert as an input source: episode after episode it resets the sim, waits for the
-//! cube to settle, plans a pick-and-place from /cube/pose (crate::expert), plays it, and judges it
+//! cube to settle, plans a pick-and-place from /cube/pose (so101_core::expert), plays it, and judges it
 //! by /task/success, announcing each episode on /episode/events so a recorder captures it.
 
 use nalgebra::Vector3;
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use serde::Serialize;
+use so101_core::expert::{cube_yaw, ExpertConfig, Plan};
 
 use super::{Reading, Request, Source, Tick};
-use crate::{
-    controls::Control,
-    expert::{cube_yaw, ExpertConfig, Plan},
-    motion::Jog,
-};
+use crate::{controls::Control, motion::Jog};
 
 /// /cube/pose messages to wait for after a reset before planning (0.3 s at the sim's 100 Hz): the
 /// cube has settled on the table.

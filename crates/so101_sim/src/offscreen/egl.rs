@@ -29,6 +29,7 @@ pub struct EglContext {
 impl EglContext {
     pub fn create() -> Result<Self, GlError> {
         // Opened with RTLD_LOCAL (libloading's default), see the module documentation.
+        // SAFETY: loading libEGL runs only its initialisers; the functions are looked up by name.
         let egl = unsafe { Egl::load_required() }.map_err(|error| {
             GlError::Egl(format!(
                 "cannot load libEGL.so.1 ({error}): install libegl1 and libegl-mesa0"
@@ -79,6 +80,7 @@ fn candidate_displays(egl: &Egl) -> Vec<(String, egl::Display)> {
     let mut software = Vec::new();
     for (index, device, is_software) in devices(egl) {
         let display =
+            // SAFETY: `device` came from eglQueryDevicesEXT of this EGL instance.
             unsafe { egl.get_platform_display(PLATFORM_DEVICE_EXT, device, &[egl::ATTRIB_NONE]) };
         if let Ok(display) = display {
             let entry = (format!("EGL device {index}"), display);
@@ -89,6 +91,7 @@ fn candidate_displays(egl: &Egl) -> Vec<(String, egl::Display)> {
             }
         }
     }
+    // SAFETY: the surfaceless platform takes no native display (NULL) and an empty attribute list.
     let surfaceless = unsafe {
         egl.get_platform_display(
             PLATFORM_SURFACELESS_MESA,
@@ -113,10 +116,13 @@ fn devices(egl: &Egl) -> Vec<(usize, *mut c_void, bool)> {
     ) else {
         return Vec::new();
     };
+    // SAFETY: looked up by this name, whose signature EGL_EXT_device_enumeration defines.
     let query_devices: QueryDevices = unsafe { std::mem::transmute(query_devices) };
+    // SAFETY: looked up by this name, whose signature EGL_EXT_device_query defines.
     let query_string: QueryDeviceString = unsafe { std::mem::transmute(query_string) };
     let mut devices = [std::ptr::null_mut(); 16];
     let mut count: egl::Int = 0;
+    // SAFETY: `devices` has room for `devices.len()` entries.
     let ok = unsafe { query_devices(devices.len() as egl::Int, devices.as_mut_ptr(), &mut count) };
     if ok != egl::TRUE {
         return Vec::new();
@@ -126,8 +132,10 @@ fn devices(egl: &Egl) -> Vec<(usize, *mut c_void, bool)> {
         .take(count.max(0) as usize)
         .enumerate()
         .map(|(index, device)| {
+            // SAFETY: `device` was returned by eglQueryDevicesEXT.
             let extensions = unsafe { query_string(device, EXTENSIONS) };
             let is_software = !extensions.is_null()
+                // SAFETY: EGL returns a NUL-terminated string it owns (NULL was checked before).
                 && unsafe { CStr::from_ptr(extensions) }
                     .to_string_lossy()
                     .split_whitespace()

@@ -1,7 +1,9 @@
-//! A safe wrapper over the few parts of the MuJoCo 2.2.2 C API the node uses: loading a model,
-//! stepping it, and reading and writing its state. All raw pointers stay inside this module.
+//! A safe wrapper over the few parts of the MuJoCo 2.2.2 C API the simulation uses: loading a
+//! model, stepping it, and reading and writing its state. All raw pointers stay inside this module
+//! (the generated bindings are private to it).
+#![allow(unsafe_code)]
 
-pub mod ffi;
+mod ffi;
 pub mod render;
 
 use std::{
@@ -51,6 +53,7 @@ impl ObjectKind {
 /// "Press Enter to exit", writes MUJOCO_LOG.TXT into the working directory and calls exit(1).
 pub fn install_log_handlers() {
     static INSTALL: Once = Once::new();
+    // SAFETY: the handlers are plain function pointers, written once before any model loads.
     INSTALL.call_once(|| unsafe {
         ffi::mju_user_error = Some(on_mujoco_error);
         ffi::mju_user_warning = Some(on_mujoco_warning);
@@ -58,21 +61,24 @@ pub fn install_log_handlers() {
 }
 
 unsafe extern "C" fn on_mujoco_error(message: *const c_char) {
+    // SAFETY: MuJoCo passes a NUL-terminated message or NULL, which text_from_c handles.
     let text = unsafe { text_from_c(message) };
-    tracing::error!(target: "so101_sim_node::mujoco", "MuJoCo fatal error: {text}");
+    tracing::error!(target: "so101_sim::mujoco", "MuJoCo fatal error: {text}");
     // MuJoCo's state is undefined after an error and the handler must not return into it.
     std::process::exit(1);
 }
 
 unsafe extern "C" fn on_mujoco_warning(message: *const c_char) {
+    // SAFETY: MuJoCo passes a NUL-terminated message or NULL, which text_from_c handles.
     let text = unsafe { text_from_c(message) };
-    tracing::warn!(target: "so101_sim_node::mujoco", "MuJoCo warning: {text}");
+    tracing::warn!(target: "so101_sim::mujoco", "MuJoCo warning: {text}");
 }
 
 unsafe fn text_from_c(message: *const c_char) -> String {
     if message.is_null() {
         return String::new();
     }
+    // SAFETY: the caller passes a NUL-terminated string that outlives this call (NULL was handled above).
     unsafe { CStr::from_ptr(message) }
         .to_string_lossy()
         .into_owned()
@@ -80,6 +86,7 @@ unsafe fn text_from_c(message: *const c_char) -> String {
 
 /// MuJoCo library version as "2.2.2".
 pub fn version() -> String {
+    // SAFETY: no arguments and no state.
     let number = unsafe { ffi::mj_version() };
     format!("{}.{}.{}", number / 100, number / 10 % 10, number % 10)
 }
@@ -99,7 +106,7 @@ impl std::fmt::Debug for Simulation {
     }
 }
 
-// The model and data are owned exclusively; MuJoCo keeps no thread-local state for them.
+// SAFETY: The model and data are owned exclusively; MuJoCo keeps no thread-local state for them.
 unsafe impl Send for Simulation {}
 
 impl Simulation {
@@ -125,47 +132,59 @@ impl Simulation {
         let size = i32::try_from(xml.len())
             .map_err(|_| MujocoError::Vfs("model text too large".into()))?;
         // mjVFS holds 2000 file names inline (about 2 MB): keep it off the stack.
+        // SAFETY: mjVFS is plain C data (counts, arrays, pointers) for which all zeros is valid.
         let mut vfs: Box<ffi::mjVFS> = unsafe { Box::new_zeroed().assume_init() };
+        // SAFETY: `vfs` is an owned, writable mjVFS.
         unsafe { ffi::mj_defaultVFS(vfs.as_mut()) };
+        // SAFETY: `vfs` was initialised by mj_defaultVFS and `c_name` is NUL-terminated.
         let status = unsafe { ffi::mj_makeEmptyFileVFS(vfs.as_mut(), c_name.as_ptr(), size) };
         if status != 0 {
             return Err(MujocoError::Vfs(format!(
                 "mj_makeEmptyFileVFS returned {status}"
             )));
         }
+        // SAFETY: `vfs` was initialised by mj_defaultVFS and `c_name` is NUL-terminated.
         let index = unsafe { ffi::mj_findFileVFS(vfs.as_ref(), c_name.as_ptr()) };
         let slot = usize::try_from(index)
             .map_err(|_| MujocoError::Vfs("file vanished from the VFS".into()))?;
+        // SAFETY: mj_makeEmptyFileVFS allocated `size` (= xml.len()) bytes for this slot.
         unsafe {
             std::ptr::copy_nonoverlapping(xml.as_ptr(), vfs.filedata[slot].cast::<u8>(), xml.len());
         }
         let model = load(&c_name, vfs.as_ref(), name);
+        // SAFETY: frees the buffers mj_makeEmptyFileVFS allocated, once.
         unsafe { ffi::mj_deleteVFS(vfs.as_mut()) };
         Self::with_model(model?)
     }
 
     fn with_model(model: NonNull<ffi::mjModel>) -> Result<Self, MujocoError> {
+        // SAFETY: `model` is a valid compiled model.
         let data = unsafe { ffi::mj_makeData(model.as_ptr()) };
         let Some(data) = NonNull::new(data) else {
+            // SAFETY: no Simulation owns the model yet: it is freed once, here.
             unsafe { ffi::mj_deleteModel(model.as_ptr()) };
             return Err(MujocoError::MakeData);
         };
         let simulation = Self { model, data };
+        // SAFETY: model and data were just made for each other.
         unsafe { ffi::mj_forward(simulation.model.as_ptr(), simulation.data.as_ptr()) };
         Ok(simulation)
     }
 
     fn model(&self) -> &ffi::mjModel {
+        // SAFETY: the model lives as long as `self` and is only read through this reference.
         unsafe { self.model.as_ref() }
     }
 
     fn data(&self) -> &ffi::mjData {
+        // SAFETY: the data lives as long as `self`; writes go through `&mut self` methods only.
         unsafe { self.data.as_ref() }
     }
 
     /// Id of the named element, or `None` when the model has none of that name.
     pub fn id(&self, kind: ObjectKind, name: &str) -> Option<usize> {
         let c_name = CString::new(name).ok()?;
+        // SAFETY: valid model; `c_name` is NUL-terminated.
         let id = unsafe { ffi::mj_name2id(self.model.as_ptr(), kind.raw(), c_name.as_ptr()) };
         usize::try_from(id).ok()
     }
@@ -179,16 +198,19 @@ impl Simulation {
     }
 
     pub fn step(&mut self) {
+        // SAFETY: model and data belong together and `&mut self` makes the access exclusive.
         unsafe { ffi::mj_step(self.model.as_ptr(), self.data.as_ptr()) };
     }
 
     /// Recomputes positions, contacts and forces after the state was set directly.
     pub fn forward(&mut self) {
+        // SAFETY: model and data belong together and `&mut self` makes the access exclusive.
         unsafe { ffi::mj_forward(self.model.as_ptr(), self.data.as_ptr()) };
     }
 
     /// Back to the model's initial state (qpos0, zero velocity, zero controls, time 0).
     pub fn reset(&mut self) {
+        // SAFETY: model and data belong together and `&mut self` makes the access exclusive.
         unsafe { ffi::mj_resetData(self.model.as_ptr(), self.data.as_ptr()) };
     }
 
@@ -212,6 +234,7 @@ impl Simulation {
 
     pub fn qpos_mut(&mut self) -> &mut [f64] {
         let len = self.model().nq as usize;
+        // SAFETY: MuJoCo allocated nq doubles here for the life of the data; `&mut self` makes the borrow exclusive.
         unsafe { std::slice::from_raw_parts_mut(self.data().qpos, len) }
     }
 
@@ -221,11 +244,13 @@ impl Simulation {
 
     pub fn qvel_mut(&mut self) -> &mut [f64] {
         let len = self.model().nv as usize;
+        // SAFETY: MuJoCo allocated nv doubles here for the life of the data; `&mut self` makes the borrow exclusive.
         unsafe { std::slice::from_raw_parts_mut(self.data().qvel, len) }
     }
 
     pub fn ctrl_mut(&mut self) -> &mut [f64] {
         let len = self.model().nu as usize;
+        // SAFETY: MuJoCo allocated nu doubles here for the life of the data; `&mut self` makes the borrow exclusive.
         unsafe { std::slice::from_raw_parts_mut(self.data().ctrl, len) }
     }
 
@@ -283,6 +308,7 @@ impl Simulation {
         let contacts = if count == 0 || self.data().contact.is_null() {
             &[][..]
         } else {
+            // SAFETY: after a step or mj_forward the first `ncon` contacts of the array are valid.
             unsafe { std::slice::from_raw_parts(self.data().contact, count) }
         };
         contacts
@@ -292,21 +318,25 @@ impl Simulation {
 
     /// Entry `index` of an integer model array of `len` entries; panics when out of range.
     fn model_int(&self, array: *const i32, len: i32, index: usize) -> usize {
+        // SAFETY: callers pass a model array with the length MuJoCo allocated for it.
         let entries = unsafe { std::slice::from_raw_parts(array, len.max(0) as usize) };
         entries[index] as usize
     }
 
     fn model_slice(&self, array: *const f64, len: usize) -> &[f64] {
+        // SAFETY: callers pass a model array with the length MuJoCo allocated for it.
         unsafe { std::slice::from_raw_parts(array, len) }
     }
 
     fn data_slice(&self, array: *const f64, len: usize) -> &[f64] {
+        // SAFETY: callers pass a data array with the length MuJoCo allocated for it.
         unsafe { std::slice::from_raw_parts(array, len) }
     }
 }
 
 impl Drop for Simulation {
     fn drop(&mut self) {
+        // SAFETY: both were made by MuJoCo for this value alone and are freed once.
         unsafe {
             ffi::mj_deleteData(self.data.as_ptr());
             ffi::mj_deleteModel(self.model.as_ptr());
@@ -321,9 +351,11 @@ fn load(
 ) -> Result<NonNull<ffi::mjModel>, MujocoError> {
     let mut error = [0 as c_char; 1024];
     let model =
+        // SAFETY: `name` is NUL-terminated, `vfs` is NULL or valid, `error` is writable for its length.
         unsafe { ffi::mj_loadXML(name.as_ptr(), vfs, error.as_mut_ptr(), error.len() as i32) };
     NonNull::new(model).ok_or_else(|| MujocoError::Load {
         path: display.to_owned(),
+        // SAFETY: mj_loadXML leaves a NUL-terminated message in `error`.
         message: unsafe { text_from_c(error.as_ptr()) },
     })
 }

@@ -6,13 +6,13 @@
 
 use std::f64::consts::FRAC_PI_2;
 
-use nalgebra::Vector3;
-use rand::Rng;
-use rand_distr_free::normal;
-use so101_core::{
+use crate::{
     kinematics::{self, ArmPositions, IkOptions, TaskPose, ARM_JOINTS},
     robot::{JointPositions, JOINT_COUNT, JOINT_LIMITS},
 };
+use nalgebra::Vector3;
+use rand::Rng;
+use rand_distr_free::normal;
 
 /// Where things are and how the expert moves (base frame, m and s).
 #[derive(Debug, Clone, PartialEq)]
@@ -30,6 +30,36 @@ pub struct ExpertConfig {
     pub action_noise: f64,
     /// Scales every move's duration (1 = the tuned timing).
     pub slowness: f64,
+}
+
+/// Where the sim scene's bin centre is (world frame, m): the expert drops the cube above it.
+pub const SIM_BIN_IN_WORLD: [f64; 3] = [0.10, -0.22, 0.77];
+/// Height of the sim scene's table top (world frame, m).
+pub const SIM_TABLE_Z: f64 = 0.75;
+/// Gripper targets of the expert's open and closed jaws (rad).
+pub const GRIPPER_OPEN: f64 = 0.9;
+pub const GRIPPER_CLOSED: f64 = -0.17;
+
+impl ExpertConfig {
+    /// The expert in the sim scene, its base at `base_in_world`, dropping the cube above
+    /// `bin_in_world`, with the given noise (the teleop node's defaults and the in-process
+    /// expert's).
+    pub fn for_scene(
+        base_in_world: Vector3<f64>,
+        bin_in_world: Vector3<f64>,
+        waypoint_noise: f64,
+        action_noise: f64,
+    ) -> Self {
+        Self {
+            bin: bin_in_world - base_in_world,
+            table_z: SIM_TABLE_Z - base_in_world.z,
+            gripper_open: GRIPPER_OPEN,
+            gripper_closed: GRIPPER_CLOSED,
+            waypoint_noise,
+            action_noise,
+            slowness: 1.0,
+        }
+    }
 }
 
 /// One waypoint: where the grasp point is and how open the gripper is when the segment ends.

@@ -3,12 +3,11 @@
 
 use std::path::PathBuf;
 
-use so101_core::robot::{JOINT_COUNT, JOINT_LIMITS};
-use so101_sim_node::{
-    cli::default_scene,
+use so101_core::robot::{DEFAULT_SCENE, JOINT_COUNT, JOINT_LIMITS};
+use so101_sim::{
     demo::{Script, PICK_AND_PLACE},
+    env::CUBE_SPAWN_AREA,
     placement::CubeStart,
-    run::CUBE_SPAWN_AREA,
     scene,
     task::{evaluate, TaskKind},
     world::World,
@@ -17,7 +16,7 @@ use so101_sim_node::{
 const RATE_HZ: f64 = 100.0;
 
 fn world(lite: bool) -> World {
-    let simulation = scene::load(&PathBuf::from(default_scene()), lite).expect("the scene loads");
+    let simulation = scene::load(&PathBuf::from(DEFAULT_SCENE), lite).expect("the scene loads");
     World::new(simulation, 1.0 / RATE_HZ).expect("the scene has every element the node needs")
 }
 

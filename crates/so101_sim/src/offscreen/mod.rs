@@ -6,11 +6,15 @@
 //! process has loaded (its glad loader looks for eglGetProcAddress / OSMesaGetProcAddress among the
 //! global symbols, then among the loaded libraries by name); libEGL is therefore opened locally and
 //! libOSMesa globally, so that an EGL attempt that failed never shadows the OSMesa fallback.
+#![allow(unsafe_code)]
 
 mod egl;
 mod osmesa;
 
-use std::ffi::{c_char, c_void, CStr};
+use std::{
+    ffi::{c_char, c_void, CStr},
+    marker::PhantomData,
+};
 
 /// Which GL platform to use (`--renderer`).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
@@ -39,6 +43,9 @@ pub struct GlContext {
     platform: Platform,
     /// GL_RENDERER and GL_VERSION, for the log.
     pub description: String,
+    /// Not Send: the context is current on the thread that made it, and what renders with it
+    /// (mujoco::render::RenderContext borrows it) relies on that.
+    _current_on_this_thread: PhantomData<*const ()>,
 }
 
 enum Platform {
@@ -79,6 +86,7 @@ impl GlContext {
         Ok(Self {
             platform,
             description,
+            _current_on_this_thread: PhantomData,
         })
     }
 
@@ -100,12 +108,14 @@ fn describe(proc_address: impl Fn(&CStr) -> Option<*const c_void>) -> String {
         return "unknown renderer".into();
     };
     let get_string: extern "system" fn(u32) -> *const c_char =
+        // SAFETY: glGetString has had this signature since OpenGL 1.0.
         unsafe { std::mem::transmute(get_string) };
     let text = |name| {
         let value = get_string(name);
         if value.is_null() {
             "?".to_owned()
         } else {
+            // SAFETY: glGetString returns a static NUL-terminated string (NULL was handled above).
             unsafe { CStr::from_ptr(value) }
                 .to_string_lossy()
                 .into_owned()

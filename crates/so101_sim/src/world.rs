@@ -6,16 +6,16 @@ use so101_core::robot::{JointLimit, JointPositions, JOINT_COUNT, JOINT_NAMES};
 
 use crate::{
     mujoco::{MujocoError, ObjectKind, Simulation},
-    pacing::steps_in_period,
     placement::CubeStart,
     task::{OrientedBox, TaskObservation},
+    timing::steps_in_period,
 };
 
 #[derive(Debug, thiserror::Error)]
 pub enum WorldError {
     #[error(transparent)]
     Mujoco(#[from] MujocoError),
-    #[error("the scene has no {kind:?} named {name:?}, which the node needs")]
+    #[error("the scene has no {kind:?} named {name:?}, which the simulation needs")]
     Missing { kind: ObjectKind, name: String },
     #[error(
         "the control period {period} s is shorter than a physics step ({timestep} s): lower --rate"
@@ -139,6 +139,11 @@ impl World {
         Ok(world)
     }
 
+    /// The MuJoCo simulation itself (read only), for setting up cameras.
+    pub fn simulation(&self) -> &Simulation {
+        &self.sim
+    }
+
     /// The MuJoCo simulation itself, for the camera rig (rendering reads the state, never steps).
     pub fn simulation_mut(&mut self) -> &mut Simulation {
         &mut self.sim
@@ -188,6 +193,19 @@ impl World {
         self.sim.qvel_mut()[cube_dof..cube_dof + 6].fill(0.0);
         self.write_controls();
         self.sim.forward();
+    }
+
+    /// Lets the physics run `seconds` (whole physics steps) with the current targets, before the
+    /// episode's first control period: the control periods that follow keep their length.
+    pub fn settle(&mut self, seconds: f64) {
+        let steps = (seconds / self.timestep).round().max(0.0) as u64;
+        self.write_controls();
+        for _ in 0..steps {
+            self.sim.step();
+        }
+        self.episode_steps += steps;
+        self.total_steps += steps;
+        self.sim.refresh_kinematics();
     }
 
     /// Advances one control period with the current targets. Returns false when the physics

@@ -1,5 +1,6 @@
 //! The camera rig: the physics thread builds the views of the cameras that are due, a render
-//! thread (owning the GL context) draws them, a publisher thread sends them.
+//! thread (owning the GL context) draws them, and a consumer thread the rig's owner supplies
+//! (the sim node's publisher, a Python world's frame mailbox) takes the finished frames.
 //!
 //! Rendering never holds the physics back in real time: the physics hands a frame over only when
 //! the renderer has a free set of views, and otherwise skips (and counts) it. In lockstep and
@@ -16,21 +17,31 @@ use std::{
 };
 
 use anyhow::{bail, Context, Result};
-use so101_core::ros::RosNode;
 
-use super::{
-    intrinsics::Intrinsics,
-    publish::{publish_batches, CameraTopics, FrameBatch, RenderedFrame},
-    schedule::FrameClock,
-    spec::CameraSpec,
-};
+use super::{intrinsics::Intrinsics, schedule::FrameClock, spec::CameraSpec};
 use crate::{
     mujoco::{
-        render::{ModelHandle, RenderContext, SceneBuffer, VisualOptions},
+        render::{RenderContext, RenderModel, SceneBuffer, VisualOptions},
         ObjectKind, Simulation,
     },
     offscreen::{GlContext, RendererChoice},
 };
+
+/// One rendered frame, rows top-down, RGB.
+pub struct RenderedFrame {
+    /// Index of the camera in the rig's list.
+    pub camera: usize,
+    pub rgb: Vec<u8>,
+}
+
+/// Frames of one sim-time instant.
+pub struct FrameBatch {
+    pub sim_time: f64,
+    pub frames: Vec<RenderedFrame>,
+    /// Signalled by the consumer once it is done with the frames (the sim node answers a
+    /// lockstep /sim/step only after they are on the wire).
+    pub published: Option<SyncSender<()>>,
+}
 
 /// How the rig is set up besides its cameras.
 #[derive(Debug, Clone)]
@@ -39,8 +50,6 @@ pub struct RigOptions {
     /// Shows the collision geoms (the lite scene has no visual meshes).
     pub show_collision_geoms: bool,
     pub shadows: bool,
-    /// Also publish JPEG, at this quality.
-    pub jpeg_quality: Option<u8>,
     /// Wait for the renderer rather than skip frames (every mode but real time).
     pub wait_for_renderer: bool,
 }
@@ -96,10 +105,10 @@ pub struct CameraRig {
     totals: Arc<Mutex<RenderTotals>>,
     renderer: String,
     render_thread: Option<JoinHandle<()>>,
-    publish_thread: Option<JoinHandle<()>>,
+    consumer_thread: Option<JoinHandle<()>>,
 }
 
-/// Frames queued between the render and the publisher thread: beyond it rendering waits, and so,
+/// Frames queued between the render and the consumer thread: beyond it rendering waits, and so,
 /// through the views, does the physics (or it skips frames in real time).
 const PUBLISH_QUEUE: usize = 2;
 
@@ -124,32 +133,40 @@ impl Capture {
 }
 
 impl CameraRig {
-    /// Checks the cameras against the model, advertises their topics, and starts the render thread
+    /// The pinhole model of each camera of `specs`; an error names a camera the scene lacks.
+    pub fn intrinsics(sim: &Simulation, specs: &[CameraSpec]) -> Result<Vec<Intrinsics>> {
+        specs
+            .iter()
+            .map(|spec| {
+                let Some(model_id) = sim.id(ObjectKind::Camera, &spec.name) else {
+                    bail!(
+                        "the scene has no camera {:?} (--cameras; \"none\" renders nothing)",
+                        spec.name
+                    );
+                };
+                Ok(Intrinsics::from_fovy(
+                    sim.camera_fovy(model_id),
+                    spec.size.width,
+                    spec.size.height,
+                ))
+            })
+            .collect()
+    }
+
+    /// Checks the cameras against the model, starts `consume` on a thread of its own with the
+    /// queue of finished frames (it ends when the queue closes), and starts the render thread
     /// (which makes the GL context and uploads the model before this returns).
     pub fn start(
-        sim: &mut Simulation,
-        node: &mut RosNode,
+        sim: &Simulation,
         specs: Vec<CameraSpec>,
         rig: RigOptions,
         start_time: f64,
+        consume: impl FnOnce(Receiver<FrameBatch>) + Send + 'static,
     ) -> Result<Self> {
+        Self::intrinsics(sim, &specs)?;
         let mut cameras = Vec::with_capacity(specs.len());
-        let mut topics = Vec::with_capacity(specs.len());
         for spec in specs {
-            let Some(model_id) = sim.id(ObjectKind::Camera, &spec.name) else {
-                bail!(
-                    "the scene has no camera {:?} (--cameras; \"none\" renders nothing)",
-                    spec.name
-                );
-            };
-            let intrinsics =
-                Intrinsics::from_fovy(sim.camera_fovy(model_id), spec.size.width, spec.size.height);
-            topics.push(CameraTopics::advertise(
-                node,
-                &spec.name,
-                intrinsics,
-                rig.jpeg_quality.is_some(),
-            )?);
+            let model_id = sim.id(ObjectKind::Camera, &spec.name).unwrap_or_default();
             cameras.push(Camera {
                 clock: FrameClock::new(spec.rate, start_time, sim.timestep()),
                 spec,
@@ -157,20 +174,19 @@ impl CameraRig {
                 skipped: 0,
             });
         }
-        // The offscreen buffer must hold the largest frame.
-        let (mut width, mut height) = sim.offscreen_size();
+        // The renderer's offscreen buffer must hold the largest frame.
+        let (mut width, mut height) = (1, 1);
         for camera in &cameras {
             width = width.max(camera.spec.size.width);
             height = height.max(camera.spec.size.height);
         }
-        sim.set_offscreen_size(width, height);
+        let model = sim.render_model(width, height);
 
         let (batch_sender, batches) = mpsc::sync_channel::<FrameBatch>(PUBLISH_QUEUE);
-        let jpeg_quality = rig.jpeg_quality.unwrap_or(0);
-        let publish_thread = std::thread::Builder::new()
-            .name("camera-publisher".into())
-            .spawn(move || publish_batches(&topics, jpeg_quality, &batches))
-            .context("cannot start the camera publisher thread")?;
+        let consumer_thread = std::thread::Builder::new()
+            .name("camera-consumer".into())
+            .spawn(move || consume(batches))
+            .context("cannot start the camera consumer thread")?;
 
         // Two sets of views let the physics build the next frame while one renders; real time
         // keeps one, so a frame is never older than one render when it goes out.
@@ -196,7 +212,6 @@ impl CameraRig {
         let (job_sender, jobs) = mpsc::sync_channel::<RenderJob>(sets);
         let (return_sender, returned) = mpsc::channel::<Views>();
         let (ready_sender, ready) = mpsc::channel::<Result<String, String>>();
-        let model = sim.model_handle();
         let thread_totals = Arc::clone(&totals);
         let renderer_choice = rig.renderer;
         let render_thread = std::thread::Builder::new()
@@ -230,7 +245,6 @@ impl CameraRig {
                 .map(|camera| format!("{}:{}@{}", camera.spec.name, camera.spec.size, camera.spec.rate))
                 .collect::<Vec<_>>()
                 .join(","),
-            jpeg = rig.jpeg_quality.is_some(),
             "cameras ready"
         );
         Ok(Self {
@@ -243,7 +257,7 @@ impl CameraRig {
             totals,
             renderer,
             render_thread: Some(render_thread),
-            publish_thread: Some(publish_thread),
+            consumer_thread: Some(consumer_thread),
         })
     }
 
@@ -359,12 +373,12 @@ impl CameraRig {
 
 impl Drop for CameraRig {
     fn drop(&mut self) {
-        // Closing the job queue ends the render thread, which closes the publisher's queue.
+        // Closing the job queue ends the render thread, which closes the consumer's queue.
         self.jobs.take();
         if let Some(thread) = self.render_thread.take() {
             let _ = thread.join();
         }
-        if let Some(thread) = self.publish_thread.take() {
+        if let Some(thread) = self.consumer_thread.take() {
             let _ = thread.join();
         }
     }
@@ -372,7 +386,7 @@ impl Drop for CameraRig {
 
 struct RenderThread {
     choice: RendererChoice,
-    model: ModelHandle,
+    model: RenderModel,
     size: (u32, u32),
     sizes: Vec<(u32, u32)>,
     jobs: Receiver<RenderJob>,
@@ -391,9 +405,7 @@ fn render_thread(work: RenderThread) {
         }
     };
     let started = Instant::now();
-    // Safety: the GL context is current on this thread, and the model is alive: CameraRig::start
-    // waits for this thread to report ready before it returns, and the model is read only here.
-    let mut context = unsafe { RenderContext::new(&work.model) };
+    let mut context = RenderContext::new(&gl, &work.model);
     let description = format!("{} ({})", gl.description, gl.platform_name());
     tracing::debug!(
         seconds = started.elapsed().as_secs_f64(),

@@ -7,10 +7,9 @@ use nalgebra::{Matrix3, UnitQuaternion, Vector3};
 use rand::{Rng, SeedableRng};
 use so101_core::{
     kinematics::{self, ArmPositions, ARM_JOINTS, SIM_BASE_IN_WORLD},
-    robot::{JOINT_LIMITS, JOINT_NAMES},
+    robot::{DEFAULT_SCENE, JOINT_LIMITS, JOINT_NAMES},
 };
-use so101_sim_node::{
-    cli::default_scene,
+use so101_sim::{
     mujoco::{ObjectKind, Simulation},
     scene,
 };
@@ -28,7 +27,7 @@ fn pose_arm(sim: &mut Simulation, joints: &ArmPositions) {
 
 #[test]
 fn forward_kinematics_matches_mujoco_within_a_micrometre() {
-    let mut sim = scene::load(&PathBuf::from(default_scene()), true).expect("the scene loads");
+    let mut sim = scene::load(&PathBuf::from(DEFAULT_SCENE), true).expect("the scene loads");
     let tip = sim
         .id(ObjectKind::Site, "gripper_tip")
         .expect("gripper_tip site");
@@ -72,7 +71,7 @@ fn forward_kinematics_matches_mujoco_within_a_micrometre() {
 
 #[test]
 fn inverse_kinematics_puts_mujocos_grasp_point_on_the_target() {
-    let mut sim = scene::load(&PathBuf::from(default_scene()), true).expect("the scene loads");
+    let mut sim = scene::load(&PathBuf::from(DEFAULT_SCENE), true).expect("the scene loads");
     let tip = sim
         .id(ObjectKind::Site, "gripper_tip")
         .expect("gripper_tip site");

@@ -30,6 +30,7 @@ impl OsmesaContext {
             GlError::Osmesa(format!("{what}: {detail}"))
         };
         // Global, so that MuJoCo's loader finds OSMesaGetProcAddress (module documentation).
+        // SAFETY: loading libOSMesa runs only its initialisers; the functions are looked up by name.
         let library = unsafe { Library::open(Some(LIBRARY), RTLD_NOW | RTLD_GLOBAL) }
             .map_err(|e| error(&format!("cannot load {LIBRARY} (install libosmesa6)"), &e))?;
         let symbol = |name: &[u8]| {
@@ -38,6 +39,7 @@ impl OsmesaContext {
                 String::from_utf8_lossy(name)
             ))
         };
+        // SAFETY: the symbols have the signatures OSMesa's header declares; the buffer handed to OSMesaMakeCurrent is owned by the returned value, as is the context.
         unsafe {
             let create: Symbol<CreateContextExt> = library
                 .get(b"OSMesaCreateContextExt")
@@ -78,6 +80,7 @@ impl OsmesaContext {
     }
 
     pub fn proc_address(&self, name: &CStr) -> Option<*const c_void> {
+        // SAFETY: `name` is NUL-terminated.
         let address = unsafe { (self.get_proc_address)(name.as_ptr()) };
         (!address.is_null()).then_some(address)
     }
@@ -85,6 +88,7 @@ impl OsmesaContext {
 
 impl Drop for OsmesaContext {
     fn drop(&mut self) {
+        // SAFETY: made by OSMesaCreateContextExt, destroyed once.
         unsafe { (self.destroy)(self.context) };
     }
 }

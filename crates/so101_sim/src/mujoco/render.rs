@@ -2,7 +2,10 @@
 //! and the GL-side context that draws them on the render thread. A GL context must be current on
 //! the thread that makes and uses a [`RenderContext`] (crate::offscreen provides one).
 
+use std::{marker::PhantomData, ptr::NonNull};
+
 use super::{ffi, Simulation};
+use crate::offscreen::GlContext;
 
 /// What the cameras show: the model's visual groups, plus the collision geoms (group 3) when the
 /// scene has no visual meshes (the lite variant would otherwise show no arm).
@@ -14,6 +17,7 @@ const COLLISION_GROUP: usize = 3;
 impl VisualOptions {
     pub fn new(show_collision_geoms: bool) -> Self {
         let mut options = ffi::mjvOption::default();
+        // SAFETY: `options` is a writable mjvOption.
         unsafe { ffi::mjv_defaultOption(&mut options) };
         options.geomgroup[COLLISION_GROUP] = u8::from(show_collision_geoms);
         Self(options)
@@ -26,7 +30,7 @@ pub struct SceneBuffer {
     scene: Box<ffi::mjvScene>,
 }
 
-// The scene is plain memory owned by this value; MuJoCo keeps no pointer to it elsewhere.
+// SAFETY: The scene is plain memory owned by this value; MuJoCo keeps no pointer to it elsewhere.
 unsafe impl Send for SceneBuffer {}
 
 /// Room for the geoms of one view (the scene has about 60; decorations add a few).
@@ -35,6 +39,7 @@ const MAX_SCENE_GEOMS: i32 = 2000;
 impl SceneBuffer {
     pub fn new(sim: &Simulation, shadows: bool) -> Self {
         let mut scene: Box<ffi::mjvScene> = Box::default();
+        // SAFETY: `scene` is a writable mjvScene and the model is valid.
         unsafe {
             ffi::mjv_defaultScene(scene.as_mut());
             ffi::mjv_makeScene(sim.model.as_ptr(), scene.as_mut(), MAX_SCENE_GEOMS);
@@ -46,21 +51,32 @@ impl SceneBuffer {
 
 impl Drop for SceneBuffer {
     fn drop(&mut self) {
+        // SAFETY: made by mjv_makeScene, freed once.
         unsafe { ffi::mjv_freeScene(self.scene.as_mut()) };
     }
 }
 
-/// The model, to be read by [`RenderContext::new`] on another thread while the physics goes on
-/// (MuJoCo never writes to a model while stepping). Valid as long as its [`Simulation`] lives.
-pub struct ModelHandle(*const ffi::mjModel);
+/// A private copy of the model for a renderer on another thread, its offscreen buffer sized for the
+/// largest frame: the renderer reads it while the physics goes on, and the simulation's own model
+/// is never touched.
+pub struct RenderModel(NonNull<ffi::mjModel>);
 
-unsafe impl Send for ModelHandle {}
+// SAFETY: the copy is owned by this value alone; MuJoCo keeps no thread-local state for models.
+unsafe impl Send for RenderModel {}
+
+impl Drop for RenderModel {
+    fn drop(&mut self) {
+        // SAFETY: the model was made by mj_copyModel and is freed once, here.
+        unsafe { ffi::mj_deleteModel(self.0.as_ptr()) };
+    }
+}
 
 impl Simulation {
     /// Brings body, site and camera poses up to the current joint positions (mj_step leaves them
     /// at the state before its integration), so a frame shows the state it is stamped with.
     pub fn refresh_kinematics(&mut self) {
         let (model, data) = (self.model.as_ptr(), self.data.as_ptr());
+        // SAFETY: model and data belong together and `&mut self` makes the access exclusive.
         unsafe {
             ffi::mj_kinematics(model, data);
             ffi::mj_comPos(model, data);
@@ -76,9 +92,11 @@ impl Simulation {
         options: &VisualOptions,
     ) {
         let mut view = ffi::mjvCamera::default();
+        // SAFETY: `view` is a writable mjvCamera.
         unsafe { ffi::mjv_defaultCamera(&mut view) };
         view.type_ = ffi::mjCAMERA_FIXED as i32;
         view.fixedcamid = camera as i32;
+        // SAFETY: valid model and data; the scene buffer was made for this scene and the options initialised.
         unsafe {
             ffi::mjv_updateScene(
                 self.model.as_ptr(),
@@ -95,51 +113,54 @@ impl Simulation {
     /// Vertical field of view of a model camera, in degrees (MJCF `fovy`).
     pub fn camera_fovy(&self, camera: usize) -> f64 {
         let model = self.model();
+        // SAFETY: cam_fovy holds ncam entries.
         let fovy = unsafe { std::slice::from_raw_parts(model.cam_fovy, model.ncam as usize) };
         fovy[camera]
     }
 
-    /// Largest frame the offscreen buffer holds (MJCF `<visual><global offwidth offheight>`).
-    pub fn offscreen_size(&self) -> (u32, u32) {
-        let global = &self.model().vis.global;
-        (
-            global.offwidth.max(0) as u32,
-            global.offheight.max(0) as u32,
-        )
-    }
-
-    /// Resizes the offscreen buffer; takes effect in the next [`RenderContext`] made.
-    pub fn set_offscreen_size(&mut self, width: u32, height: u32) {
-        let global = unsafe { &mut self.model.as_mut().vis.global };
-        global.offwidth = width as i32;
-        global.offheight = height as i32;
-    }
-
-    pub fn model_handle(&self) -> ModelHandle {
-        ModelHandle(self.model.as_ptr())
+    /// A copy of the model for a renderer whose frames are at most `width` x `height` (the
+    /// offscreen buffer grows to hold them; MJCF `<visual><global offwidth offheight>` otherwise).
+    pub fn render_model(&self, width: u32, height: u32) -> RenderModel {
+        // SAFETY: the model is valid; a NULL destination makes MuJoCo allocate the copy.
+        let copy = unsafe { ffi::mj_copyModel(std::ptr::null_mut(), self.model.as_ptr()) };
+        let Some(mut copy) = NonNull::new(copy) else {
+            panic!("MuJoCo could not allocate a copy of the model");
+        };
+        // SAFETY: the copy is ours alone.
+        let global = unsafe { &mut copy.as_mut().vis.global };
+        global.offwidth = global.offwidth.max(width as i32);
+        global.offheight = global.offheight.max(height as i32);
+        RenderModel(copy)
     }
 }
 
 /// MuJoCo's GL resources (meshes, textures, the offscreen framebuffer) in the current GL context.
-pub struct RenderContext {
+pub struct RenderContext<'gl> {
     context: Box<ffi::mjrContext>,
+    _gl: PhantomData<&'gl GlContext>,
 }
 
-impl RenderContext {
-    /// Uploads the model to the GL context current on this thread and selects the offscreen
-    /// framebuffer.
-    ///
-    /// # Safety
-    /// A GL context (2.0 or newer) must be current on this thread, and `model` must be alive for
-    /// the duration of the call.
-    pub unsafe fn new(model: &ModelHandle) -> Self {
+impl<'gl> RenderContext<'gl> {
+    /// Uploads the model to `gl` (current on this thread, as a [`GlContext`] always is on the
+    /// thread that owns it) and selects the offscreen framebuffer. The context borrows `gl`, so
+    /// MuJoCo's GL resources go before their GL context does.
+    pub fn new(_gl: &'gl GlContext, model: &RenderModel) -> Self {
         let mut context: Box<ffi::mjrContext> = Box::default();
+        // SAFETY: a GL context is current on this thread (`gl` cannot leave the thread that made
+        // it current) and the model copy is alive for the call.
         unsafe {
             ffi::mjr_defaultContext(context.as_mut());
-            ffi::mjr_makeContext(model.0, context.as_mut(), ffi::mjFONTSCALE_100 as i32);
+            ffi::mjr_makeContext(
+                model.0.as_ptr(),
+                context.as_mut(),
+                ffi::mjFONTSCALE_100 as i32,
+            );
             ffi::mjr_setBuffer(ffi::mjFB_OFFSCREEN as i32, context.as_mut());
         }
-        Self { context }
+        Self {
+            context,
+            _gl: PhantomData,
+        }
     }
 
     /// Size of the offscreen framebuffer actually created.
@@ -165,6 +186,7 @@ impl RenderContext {
             width: width as i32,
             height: height as i32,
         };
+        // SAFETY: the viewport lies within the offscreen buffer (asserted), `rgb` holds exactly its pixels, and the GL context is current on this thread (the context borrows the thread's GlContext).
         unsafe {
             ffi::mjr_render(viewport, scene.scene.as_mut(), self.context.as_ref());
             ffi::mjr_readPixels(
@@ -177,8 +199,9 @@ impl RenderContext {
     }
 }
 
-impl Drop for RenderContext {
+impl Drop for RenderContext<'_> {
     fn drop(&mut self) {
+        // SAFETY: made by mjr_makeContext, freed once while its GL context is still current (it outlives this value).
         unsafe { ffi::mjr_freeContext(self.context.as_mut()) };
     }
 }

@@ -1,0 +1,148 @@
+//! The task environment both front doors step (so101_sim_node over ROS, the Python extension
+//! in-process): a world, the task that scores it, and the seeded sequence of cube placements.
+//! One source for resets, physics, reward and success, whichever door is used.
+
+use so101_core::robot::{JointPositions, JOINT_COUNT};
+
+use crate::{
+    mujoco::Simulation,
+    placement::{CubePlacer, CubeStart, SpawnArea},
+    task::{self, TaskKind, TaskOutcome},
+    world::{ArmState, CubePose, World, WorldError},
+};
+
+/// Where a reset may put the cube (world frame, m): every point was picked into the bin by a
+/// scripted grasp in this scene, and it stays at least 6.5 cm clear of the bin.
+pub const CUBE_SPAWN_AREA: SpawnArea = SpawnArea {
+    x: (0.18, 0.28),
+    y: (-0.08, 0.08),
+};
+
+/// Sim time a reset lets the arm settle at home before the episode starts (s): the servos sag
+/// under gravity (shoulder_lift by ~0.012 rad) within it, so an episode starts from the pose a
+/// recorded one does, not from the model's exact zero.
+pub const SETTLE_SECONDS: f64 = 0.3;
+
+/// What the episode is scored by.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct TaskSettings {
+    pub kind: TaskKind,
+    /// cube_to_bin only: staged dense shaping instead of the sparse reward.
+    pub dense_reward: bool,
+}
+
+/// Everything observable after a reset or a step.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Observation {
+    /// Sim time since the environment was made (monotonic across episodes), s.
+    pub time: f64,
+    pub arm: ArmState,
+    pub cube: CubePose,
+    pub outcome: TaskOutcome,
+}
+
+impl Observation {
+    /// The flat vector of the Gymnasium environments: joint positions (6, rad), velocities
+    /// (6, rad/s), cube position (3, m, world) and orientation (4, w x y z).
+    pub fn state_vector(&self) -> [f64; STATE_SIZE] {
+        let mut vector = [0.0; STATE_SIZE];
+        vector[..JOINT_COUNT].copy_from_slice(&self.arm.position);
+        vector[JOINT_COUNT..2 * JOINT_COUNT].copy_from_slice(&self.arm.velocity);
+        vector[2 * JOINT_COUNT..2 * JOINT_COUNT + 3].copy_from_slice(&self.cube.position);
+        vector[2 * JOINT_COUNT + 3..].copy_from_slice(&self.cube.orientation);
+        vector
+    }
+}
+
+/// Length of [`Observation::state_vector`].
+pub const STATE_SIZE: usize = 2 * JOINT_COUNT + 7;
+
+pub struct TaskEnv {
+    world: World,
+    settings: TaskSettings,
+    placer: CubePlacer,
+    /// Physics divergences (MuJoCo reset its state; the episode restarted from its start).
+    pub divergences: u64,
+}
+
+impl TaskEnv {
+    /// Binds the scene at `control_rate` Hz; `seed` starts the sequence of cube placements (a
+    /// reset with a seed starts it over).
+    pub fn new(
+        sim: Simulation,
+        control_rate: f64,
+        settings: TaskSettings,
+        seed: u64,
+    ) -> Result<Self, WorldError> {
+        Ok(Self {
+            world: World::new(sim, 1.0 / control_rate)?,
+            settings,
+            placer: CubePlacer::new(CUBE_SPAWN_AREA, seed),
+            divergences: 0,
+        })
+    }
+
+    pub fn world(&self) -> &World {
+        &self.world
+    }
+
+    pub fn world_mut(&mut self) -> &mut World {
+        &mut self.world
+    }
+
+    pub fn settings(&self) -> TaskSettings {
+        self.settings
+    }
+
+    /// A new episode: the cube at the next placement of the sequence (restarted from `seed` when
+    /// given), the arm at home, settled for [`SETTLE_SECONDS`].
+    pub fn reset(&mut self, seed: Option<u64>) -> CubeStart {
+        if let Some(seed) = seed {
+            self.placer = CubePlacer::new(CUBE_SPAWN_AREA, seed);
+        }
+        let start = self.placer.next_start();
+        self.world.reset(Some(start));
+        self.world.settle(SETTLE_SECONDS);
+        start
+    }
+
+    /// One control period towards `targets` (clamped to the joint limits; non-finite values keep
+    /// the previous target).
+    pub fn step(&mut self, targets: &JointPositions) {
+        let limits = *self.world.limits();
+        let current = self.world.targets_mut();
+        for joint in 0..JOINT_COUNT {
+            if targets[joint].is_finite() {
+                current[joint] = limits[joint].clamp(targets[joint]);
+            }
+        }
+        self.advance();
+    }
+
+    /// One control period with the targets as they are; false when the physics diverged.
+    pub fn advance(&mut self) -> bool {
+        let ok = self.world.advance();
+        if !ok {
+            self.divergences += 1;
+        }
+        ok
+    }
+
+    /// Reward and success of the current state.
+    pub fn outcome(&self) -> TaskOutcome {
+        task::evaluate(
+            self.settings.kind,
+            self.settings.dense_reward,
+            &self.world.task_observation(),
+        )
+    }
+
+    pub fn observe(&self) -> Observation {
+        Observation {
+            time: self.world.time(),
+            arm: self.world.arm_state(),
+            cube: self.world.cube_pose(),
+            outcome: self.outcome(),
+        }
+    }
+}
