@@ -2,6 +2,7 @@
 # Run the benchmarks of docs/benchmarks.md (set-up first), all peers in one private network namespace.
 #   scripts/bench.sh                     all of them, with their defaults (no further arguments)
 #   scripts/bench.sh sim [--repeats N] [--seconds S] [--samples N] [--json FILE]
+#   scripts/bench.sh sim_core [--steps N] [--repeats N] [--num-envs N] [--cameras none,64x48,320x240] [--json FILE]
 #   scripts/bench.sh driver [--repeats N] [--seconds S] [--baud B] [--json FILE]
 #   scripts/bench.sh recorder [--seconds S] [--sweep-seconds S] [--rates HZ,...] [--repeats N] [--workdir DIR] [--json FILE]
 #   scripts/bench.sh cameras [--repeats N] [--seconds S] [--frames N] [--json FILE]
@@ -17,7 +18,7 @@ run() {
         --bin-dir "${CARGO_TARGET_DIR}/release" "${@:2}"
 }
 case "${1:-all}" in
-    sim | driver | recorder | cameras | expert | convert) run "$@" ;;
-    all) run sim && run driver && run recorder && run cameras && run expert && run convert ;;
-    *) echo "usage: scripts/bench.sh [sim|driver|recorder|cameras|expert|convert] [ARGS...]" >&2; exit 2 ;;
+    sim | sim_core | driver | recorder | cameras | expert | convert) run "$@" ;;
+    all) run sim && run sim_core && run driver && run recorder && run cameras && run expert && run convert ;;
+    *) echo "usage: scripts/bench.sh [sim|sim_core|driver|recorder|cameras|expert|convert] [ARGS...]" >&2; exit 2 ;;
 esac

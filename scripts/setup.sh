@@ -69,4 +69,13 @@ PYTHON="${REPO_ROOT}/.venv/bin/python" "${REPO_ROOT}/scripts/fetch_assets.sh"
 cargo fetch --locked --manifest-path "${REPO_ROOT}/Cargo.toml"
 log "building the workspace (release) into ${CARGO_TARGET_DIR}"
 cargo build --release --locked --workspace --manifest-path "${REPO_ROOT}/Cargo.toml"
+# The simulation core's Python extension (the in-process Gymnasium environments), built from the
+# same target directory (nothing recompiles) and installed into the venv.
+log "installing the so101_native Python extension into ${REPO_ROOT}/.venv"
+rm -f "${CARGO_TARGET_DIR}"/wheels/so101_native-*.whl
+"${REPO_ROOT}/.venv/bin/maturin" build --release --locked --quiet --compatibility linux --auditwheel skip \
+    --manifest-path "${REPO_ROOT}/crates/so101_native/Cargo.toml" \
+    --interpreter "${REPO_ROOT}/.venv/bin/python" --out "${CARGO_TARGET_DIR}/wheels"
+"${REPO_ROOT}/.venv/bin/python" -m pip install --quiet --disable-pip-version-check --force-reinstall --no-deps \
+    "${CARGO_TARGET_DIR}"/wheels/so101_native-*.whl
 log "ready: binaries in ${CARGO_TARGET_DIR}/release"

@@ -105,7 +105,10 @@ def test_the_adapter_converts_observations_and_actions_to_lerobot_units():
     state = np.concatenate([joints, velocities, cube]).astype(np.float32)
     image = np.full((48, 64, 3), 7, dtype=np.uint8)
 
-    observation = observation_from_sim({"state": state, "pixels": {"top": image, "front": image}}, {"top": (48, 64)}, True)
+    from so101.sim_env import observation_from_state
+
+    sim_observation = observation_from_state(state, {"top": image, "front": image})
+    observation = observation_from_sim(sim_observation, {"top": (48, 64)}, True)
     assert set(observation) == {"agent_pos", "environment_state", "pixels"}
     assert observation["agent_pos"].dtype == np.float32
     # Degrees for the arm, 0-100 over the gripper's range (computed here, not with so101.units).
@@ -114,7 +117,7 @@ def test_the_adapter_converts_observations_and_actions_to_lerobot_units():
     assert np.allclose(observation["environment_state"], cube)
     assert list(observation["pixels"]) == ["top"] and observation["pixels"]["top"] is image
 
-    bare = observation_from_sim(state, {}, False)
+    bare = observation_from_sim(observation_from_state(state, None), {}, False)
     assert set(bare) == {"agent_pos"}
 
     # Actions: the inverse; the converter's dataset actions come back as the sim's radians.

@@ -18,6 +18,17 @@ pub enum TaskKind {
     CubeToBin,
 }
 
+impl std::str::FromStr for TaskKind {
+    type Err = String;
+
+    /// The task's name as on the command line ("cube_to_bin", "touch_cube", "touch_cube_sparse").
+    fn from_str(name: &str) -> Result<Self, String> {
+        <Self as clap::ValueEnum>::from_str(name, false).map_err(|_| {
+            format!("unknown task {name:?}: cube_to_bin, touch_cube or touch_cube_sparse")
+        })
+    }
+}
+
 /// Tip-to-cube-centre distance under which the gripper counts as touching the cube (m): half the
 /// 3 cm cube plus 1.5 cm for the finger pads.
 pub const TOUCH_DISTANCE: f64 = 0.03;

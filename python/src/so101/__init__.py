@@ -1,8 +1,9 @@
 """The SO-101 ROS 2 stack's Python side: episode bags (recorder_node, rosbag2 MCAP) to LeRobot
 datasets, policies run through rclpy, Gymnasium environments, the launcher, benchmarks.
 
-`import so101` registers the Gymnasium environments (`gym.make("so101/CubeToBin-v0")`)."""
+`import so101` registers the Gymnasium environments (`gym.make("so101/CubeToBin-v0")`, in-process;
+`backend="ros"` for so101_sim_node in lockstep)."""
 
-from .gym_env import register_envs
+from .sim_env import register_envs
 
 register_envs()

@@ -1,16 +1,14 @@
-"""Gymnasium environments over so101_sim_node in lockstep: `so101/CubeToBin-v0` and
-`so101/TouchCube-v0`, registered by `import so101`
-(`gym.make("so101:so101/CubeToBin-v0")` imports it by itself). Each environment
-starts its own sim node, under a namespace of its own, and talks to it through rclpy: a step publishes the action on /joint_commands and calls
-/sim/step, so Stable-Baselines3, imitation and the like run against the stack's real interface.
+"""The ROS backend of the Gymnasium environments (`gym.make("so101/CubeToBin-v0", backend="ros")`,
+so101.sim_env): so101_sim_node in lockstep, started by the environment under a namespace of its
+own, driven through rclpy. Each action is published on /joint_commands; the node runs with
+--step-on-command, so that message advances exactly one control period and the state it leads to
+is published before the next command is taken (no /sim/step call, no waiting on a timer).
+Stable-Baselines3, imitation and the like then run against the stack's real interface.
 
 Must run inside the network namespace of scripts/isolated (DDS traffic stays on the machine).
-Observation (float32[19]): joint positions (6, rad), joint velocities (6, rad/s), cube position
-(3, m, world), cube orientation (4, w x y z). With `cameras={"top": (height, width), ...}` the
-observation is a dict: {"state": that vector, "pixels": {camera: uint8[H, W, 3]}}, each camera
-rendered by the sim at the instant of the state. Action (float32[6]): joint position targets (rad),
-within the joint limits. Reward: /task/reward; terminated: /task/success (cube_to_bin); episodes
-are truncated by the registration's max_episode_steps.
+Observations, actions, rewards and info are those of so101.sim_env (the in-process backend), each
+camera rendered by the sim at the instant of the state. A seeded reset restarts the node with the
+seed (the in-process backend restarts nothing).
 """
 
 from __future__ import annotations
@@ -23,12 +21,12 @@ import uuid
 
 import gymnasium as gym
 import numpy as np
-from gymnasium import spaces
 
 from . import contract, process
 from .messages import joint_positions, rgb_image
 from .paths import node_binary, node_environment
-from .units import JOINT_LIMITS, JOINT_NAMES
+from .sim_env import action_space, checked_action, observation_from_state, observation_space
+from .units import JOINT_NAMES
 
 
 class So101SimEnv(gym.Env):
@@ -45,21 +43,14 @@ class So101SimEnv(gym.Env):
     ):
         import rclpy
         from geometry_msgs.msg import PoseStamped
-        from rclpy.executors import SingleThreadedExecutor
+        from rclpy.experimental import EventsExecutor
         from sensor_msgs.msg import Image, JointState
         from std_msgs.msg import Bool, Float64
         from std_srvs.srv import Trigger
 
-        self.action_space = spaces.Box(
-            JOINT_LIMITS[:, 0].astype(np.float32), JOINT_LIMITS[:, 1].astype(np.float32), dtype=np.float32
-        )
-        state_space = spaces.Box(-np.inf, np.inf, shape=(19,), dtype=np.float32)
-        self._cameras = dict(cameras or {})
-        if self._cameras:
-            pixels = {name: spaces.Box(0, 255, shape=(h, w, 3), dtype=np.uint8) for name, (h, w) in self._cameras.items()}
-            self.observation_space = spaces.Dict({"state": state_space, "pixels": spaces.Dict(pixels)})
-        else:
-            self.observation_space = state_space
+        self.action_space = action_space()
+        self._cameras = {name: (int(h), int(w)) for name, (h, w) in (cameras or {}).items()}
+        self.observation_space = observation_space(self._cameras)
         self._task, self._rate, self._lite, self._timeout = task, control_rate, lite, timeout
         self._dense_reward = dense_reward
         self._namespace = f"gym_{os.getpid()}_{uuid.uuid4().hex[:8]}"
@@ -68,18 +59,22 @@ class So101SimEnv(gym.Env):
         self._context = rclpy.Context()
         rclpy.init(context=self._context)
         self._node = rclpy.create_node("so101_gym", context=self._context, start_parameter_services=False)
-        self._executor = SingleThreadedExecutor(context=self._context)
+        self._executor = EventsExecutor(context=self._context)
         self._executor.add_node(self._node)
         ns = f"/{self._namespace}"
         self._latest: dict = {}
         self._counts = {"state": 0, "cube": 0, "reward": 0, "success": 0}
         self._counts.update({f"camera/{name}": 0 for name in self._cameras})
 
+        self._awaited = None  # (counts to exceed, future) of the observation being waited for
+
         def keep(key):
             def callback(msg):
                 self._latest[key] = msg
                 if key in self._counts:
                     self._counts[key] += 1
+                    if self._awaited is not None and self._counted_past(self._awaited[0]):
+                        self._awaited[1].set_result(True)
 
             return callback
 
@@ -90,12 +85,11 @@ class So101SimEnv(gym.Env):
         for name in self._cameras:
             self._node.create_subscription(Image, f"{ns}/{contract.camera_topic(name)}", keep(f"camera/{name}"), 10)
         self._commands = self._node.create_publisher(JointState, f"{ns}/{contract.JOINT_COMMANDS}", 10)
-        self._step_client = self._node.create_client(Trigger, f"{ns}/{contract.SIM_STEP}")
         self._reset_client = self._node.create_client(Trigger, f"{ns}/{contract.SIM_RESET}")
         self._trigger = Trigger.Request
-        self._head_start = 0.002  # s between a command and its step call, doubled when one is late
-        self._sent = 0  # commands published to the current sim
-        self.late_commands = 0  # steps that ran before their command arrived
+        # Each command is one step (the node's --step-on-command); the benchmark's "before" row
+        # clears it to measure the previous /sim/step protocol.
+        self.node_flags = ["--step-on-command"]
         self._JointState = JointState
 
     # ------------------------------------------------------------------ plumbing
@@ -107,6 +101,29 @@ class So101SimEnv(gym.Env):
             if time.monotonic() > deadline:
                 raise TimeoutError(f"no {what} from so101_sim_node within {self._timeout} s (log: {self._log.name})")
             self._executor.spin_once(timeout_sec=0.01)
+
+    def _counted_past(self, counts: dict) -> bool:
+        return all(self._counts[key] > counts[key] for key in self._counts)
+
+    def _wait_for_messages(self, counts: dict, what: str) -> None:
+        """Spins until every subscribed topic has a message after `counts`: one call into the
+        executor per observation (its callbacks complete the future), not one per message."""
+        from rclpy.task import Future
+
+        if self._counted_past(counts):
+            return
+        future = Future()
+        self._awaited = (counts, future)
+        try:
+            deadline = time.monotonic() + self._timeout
+            while not future.done():
+                if self._process is not None and self._process.poll() is not None:
+                    raise RuntimeError(f"so101_sim_node exited with {self._process.returncode} (log: {self._log.name})")
+                if time.monotonic() > deadline:
+                    raise TimeoutError(f"no {what} from so101_sim_node within {self._timeout} s (log: {self._log.name})")
+                self._executor.spin_until_future_complete(future, timeout_sec=0.5)
+        finally:
+            self._awaited = None
 
     def _call(self, client, what: str):
         future = client.call_async(self._trigger())
@@ -125,6 +142,7 @@ class So101SimEnv(gym.Env):
         command = [
             str(binary),
             "--lockstep",
+            *self.node_flags,
             "--rate",
             str(self._rate),
             "--task",
@@ -142,9 +160,8 @@ class So101SimEnv(gym.Env):
             command.append("--lite")
         if self._dense_reward:
             command.append("--dense-reward")
-        self._sent = 0
         self._process = process.start(command, env=node_environment(), stdout=self._log, stderr=self._log)
-        self._spin_until(lambda: self._step_client.service_is_ready() and self._reset_client.service_is_ready(), "services")
+        self._spin_until(self._reset_client.service_is_ready, "/sim/reset")
         self._spin_until(lambda: self._commands.get_subscription_count() > 0, "/joint_commands subscription")
         # Both directions of each service matched, and the start-up state taken in.
         settle = time.monotonic() + 0.5
@@ -160,7 +177,7 @@ class So101SimEnv(gym.Env):
     def _observe(self, counts: dict):
         """The observation of what the sim published after `counts` (the counters before a step or
         reset): in lockstep nothing else is published in between."""
-        self._spin_until(lambda: all(self._counts[key] > counts[key] for key in self._counts), "state of the step")
+        self._wait_for_messages(counts, "state of the step")
         state, cube = self._latest["state"], self._latest["cube"].pose
         velocity_of = dict(zip(state.name, state.velocity))
         positions = joint_positions(state)
@@ -168,16 +185,16 @@ class So101SimEnv(gym.Env):
             raise RuntimeError(f"/joint_states names {list(state.name)}, not the six joints")
         velocities = [velocity_of.get(name, 0.0) for name in JOINT_NAMES]
         p, q = cube.position, cube.orientation
-        vector = np.array([*positions, *velocities, p.x, p.y, p.z, q.w, q.x, q.y, q.z], dtype=np.float32)
+        vector = np.array([*positions, *velocities, p.x, p.y, p.z, q.w, q.x, q.y, q.z], dtype=np.float64)
         if not self._cameras:
-            return vector
+            return observation_from_state(vector, None)
         pixels = {}
         for name, (h, w) in self._cameras.items():
             image = rgb_image(self._latest[f"camera/{name}"])
             if image.shape != (h, w, 3):
                 raise RuntimeError(f"camera {name}: {image.shape[1]}x{image.shape[0]} frame, expected {w}x{h}")
             pixels[name] = image
-        return {"state": vector, "pixels": pixels}
+        return observation_from_state(vector, pixels)
 
     # ------------------------------------------------------------------ gymnasium
     def reset(self, *, seed: int | None = None, options: dict | None = None):
@@ -187,31 +204,19 @@ class So101SimEnv(gym.Env):
             self._start_sim(seed if seed is not None else 0)
         counts = dict(self._counts)
         self._call(self._reset_client, "/sim/reset")
-        return self._observe(counts), {}
+        observation = self._observe(counts)
+        return observation, {"is_success": bool(self._latest["success"].data)}
 
     def step(self, action):
-        action = np.asarray(action, dtype=np.float64)
-        if action.shape != (6,) or not np.all(np.isfinite(action)):
-            raise ValueError(f"an action is six finite joint targets, not {action}")
-        action = np.clip(action, JOINT_LIMITS[:, 0], JOINT_LIMITS[:, 1])
+        # Not clamped here: the node clamps to the scene's joint limits, as in-process.
+        action = checked_action(action)
         counts = dict(self._counts)
+        # With --step-on-command this message is the step: the node answers with its state.
         self._commands.publish(self._JointState(name=JOINT_NAMES, position=[float(v) for v in action]))
-        self._sent += 1
-        # A topic and a service are not ordered: give the command a head start over the step
-        # call, and check in the answer (commands taken so far) that it made it into this step.
-        time.sleep(self._head_start)
-        answer = self._call(self._step_client, "/sim/step")
-        taken = int(answer.message.rsplit("commands=", 1)[-1]) if "commands=" in answer.message else self._sent
-        late = taken < self._sent
-        if late:
-            # The step ran with the previous action; a loaded machine: give commands longer.
-            self.late_commands += 1
-            self._head_start = min(0.02, self._head_start * 2)
-            self._sent = taken + 1  # the late one is taken with the next step
         observation = self._observe(counts)
         success = bool(self._latest["success"].data)
         terminated = success and self._task == "cube_to_bin"
-        return observation, float(self._latest["reward"].data), terminated, False, {"success": success, "command_late": late}
+        return observation, float(self._latest["reward"].data), terminated, False, {"is_success": success}
 
     def close(self):
         import rclpy
@@ -222,11 +227,3 @@ class So101SimEnv(gym.Env):
             self._node.destroy_node()
             rclpy.try_shutdown(context=self._context)
         self._log.close()
-
-
-def register_envs() -> None:
-    """Registers the environments (`import so101` does)."""
-    ids = {"so101/CubeToBin-v0": ("cube_to_bin", 600), "so101/TouchCube-v0": ("touch_cube", 300)}
-    for env_id, (task, steps) in ids.items():
-        if env_id not in gym.registry:
-            gym.register(env_id, entry_point="so101.gym_env:So101SimEnv", kwargs={"task": task}, max_episode_steps=steps)

@@ -1,5 +1,6 @@
-"""The Gymnasium env behind LeRobot's env type `so101_sim` (so101.lerobot_env): So101SimEnv (a sim
-node in lockstep over ROS) seen the way LeRobot's envs and the converter's datasets see the robot.
+"""The Gymnasium env behind LeRobot's env type `so101_sim` (so101.lerobot_env): the task env of
+so101.sim_env (in-process by default; backend "ros" for so101_sim_node in lockstep) seen the way
+LeRobot's envs and the converter's datasets see the robot.
 
 Observation: {"agent_pos": float32[6] joint positions in LeRobot units (degrees, gripper 0-100),
 "environment_state": float32[7] cube position (m) and orientation (w x y z), world frame (when
@@ -16,26 +17,19 @@ from gymnasium import spaces
 
 from .units import JOINT_LIMITS, lerobot_from_radians, radians_from_lerobot
 
-ENVIRONMENT_STATE = slice(12, 19)  # of So101SimEnv's state vector: cube position, orientation
 
-
-def observation_from_sim(sim_observation, cameras, environment_state: bool) -> dict:
-    """So101SimEnv's observation (vector, or {"state", "pixels"}) -> LeRobot's env observation."""
-    if isinstance(sim_observation, dict):
-        state, pixels = sim_observation["state"], sim_observation["pixels"]
-    else:
-        state, pixels = sim_observation, {}
-    state = np.asarray(state)
-    observation = {"agent_pos": lerobot_from_radians(state[:6]).astype(np.float32)}
+def observation_from_sim(sim_observation: dict, cameras, environment_state: bool) -> dict:
+    """so101.sim_env's observation (radians) -> LeRobot's env observation."""
+    observation = {"agent_pos": lerobot_from_radians(sim_observation["agent_pos"]).astype(np.float32)}
     if environment_state:
-        observation["environment_state"] = state[ENVIRONMENT_STATE].astype(np.float32)
+        observation["environment_state"] = np.asarray(sim_observation["environment_state"], dtype=np.float32)
     if cameras:
-        observation["pixels"] = {name: pixels[name] for name in cameras}
+        observation["pixels"] = {name: sim_observation["pixels"][name] for name in cameras}
     return observation
 
 
 def sim_action_from_lerobot(action) -> np.ndarray:
-    """A LeRobot action (degrees, gripper 0-100) -> So101SimEnv's (radians)."""
+    """A LeRobot action (degrees, gripper 0-100) -> so101.sim_env's (radians)."""
     action = np.asarray(action, dtype=np.float64).reshape(-1)
     if action.shape != (6,):
         raise ValueError(f"an so101_sim action is 6 joint targets, not shape {action.shape}")
@@ -56,15 +50,16 @@ class So101LeRobotEnv(gym.Env):
         render_camera: str = "top",
         render_size: tuple[int, int] = (96, 128),
         render_mode: str = "rgb_array",
+        backend: str = "inprocess",
     ):
-        from .gym_env import So101SimEnv
+        from .sim_env import make_env
 
         self._cameras = {name: tuple(size) for name, size in (cameras or {}).items()}
         self._environment_state = environment_state
         self._render_camera = render_camera
         sim_cameras = dict(self._cameras)
         sim_cameras.setdefault(render_camera, tuple(render_size))
-        self._sim = So101SimEnv(task=task, control_rate=float(fps), lite=lite, cameras=sim_cameras)
+        self._sim = make_env(task, backend=backend, control_rate=float(fps), lite=lite, cameras=sim_cameras)
         self.metadata = {**self.metadata, "render_fps": fps}
         self.render_mode = render_mode
         self.task_description = self.task = task_description
@@ -88,11 +83,11 @@ class So101LeRobotEnv(gym.Env):
     def reset(self, *, seed: int | None = None, options: dict | None = None):
         super().reset(seed=seed)
         sim_observation, info = self._sim.reset(seed=seed)
-        return self._convert(sim_observation), {**info, "is_success": False}
+        return self._convert(sim_observation), {**info, "is_success": bool(info["is_success"])}
 
     def step(self, action):
         sim_observation, reward, terminated, truncated, info = self._sim.step(sim_action_from_lerobot(action))
-        return self._convert(sim_observation), reward, terminated, truncated, {**info, "is_success": bool(info["success"])}
+        return self._convert(sim_observation), reward, terminated, truncated, {**info, "is_success": bool(info["is_success"])}
 
     def render(self) -> np.ndarray:
         return self._frame

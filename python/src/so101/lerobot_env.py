@@ -72,10 +72,13 @@ class So101SimEnvConfig(EnvConfig):
     environment_state: bool = True  # observation.environment_state (cube pose), as the converter writes it
     task_description: str | None = None  # the episodes' task text; None: the task's default
     lite: bool = True  # the sim's lite rendering
+    backend: str = "inprocess"  # "inprocess" (so101_native) or "ros" (so101_sim_node in lockstep)
     render_camera: str = "top"  # the camera of lerobot-eval's videos (render())
     render_size: tuple[int, int] = (96, 128)  # its (height, width) unless it is one of `cameras`
 
     def __post_init__(self):
+        if self.backend not in ("inprocess", "ros"):
+            raise ValueError(f"so101_sim: backend {self.backend!r}, not inprocess or ros")
         if self.task not in TASKS:
             raise ValueError(f"so101_sim: task {self.task!r}, not one of {', '.join(TASKS)}")
         for name in [*self.cameras, self.render_camera]:
@@ -102,6 +105,7 @@ class So101SimEnvConfig(EnvConfig):
             "lite": self.lite,
             "render_camera": self.render_camera,
             "render_size": tuple(self.render_size),
+            "backend": self.backend,
         }
         if self.episode_length:
             kwargs["max_episode_steps"] = int(self.episode_length)

@@ -29,6 +29,7 @@ from . import contract
 from .messages import cube_pose_vector, joint_positions, rgb_image
 from .policy import PolicyError, StackPolicy
 from .rclpy_wait import spin_until
+from .stats import wilson_interval
 from .units import JOINT_LIMITS, JOINT_NAMES
 
 DEFAULT_TASK = "put the cube in the bin"
@@ -183,7 +184,7 @@ def evaluate(args, policy: StackPolicy) -> int:
     from lerobot.utils.io_utils import write_video
     from tqdm import tqdm
 
-    from .gym_env import So101SimEnv
+    from .sim_env import make_env
 
     cameras = {camera.name: (camera.height, camera.width) for camera in policy.cameras}
     # The video shows the policy's cameras, or --video-camera; a policy without cameras is filmed
@@ -195,8 +196,13 @@ def evaluate(args, policy: StackPolicy) -> int:
     output = Path(args.output)
     (output / "videos").mkdir(parents=True, exist_ok=True)
     max_steps = int(round(args.episode_time * args.fps))
-    env = So101SimEnv(
-        task=args.sim_task, control_rate=args.fps, lite=args.lite, cameras=cameras or None, dense_reward=args.reward == "dense"
+    env = make_env(
+        args.sim_task,
+        backend=args.backend,
+        control_rate=args.fps,
+        lite=args.lite,
+        cameras=cameras or None,
+        dense_reward=args.reward == "dense",
     )
     results: list[EpisodeResult] = []
     try:
@@ -208,15 +214,13 @@ def evaluate(args, policy: StackPolicy) -> int:
             video: list[np.ndarray] = []
             success = False
             for _ in range(max_steps):
-                state = observation["state"] if cameras else observation
-                pixels = observation["pixels"] if cameras else {}
+                pixels = observation.get("pixels", {})
                 if video_cameras:
                     video.append(tile({name: pixels[name] for name in video_cameras}))
-                # So101SimEnv's state: joints (6), velocities (6), cube position (3) and orientation (4).
-                target = policy.act(policy.observation(state[:6].astype(np.float64), pixels, state[12:19].astype(np.float64)))
+                target = policy.act(policy.observation(observation["agent_pos"], pixels, observation["environment_state"]))
                 observation, reward, terminated, _, info = env.step(target)
                 rewards.append(reward)
-                if info["success"]:
+                if info["is_success"]:
                     success = True
                 if terminated:
                     break
@@ -237,12 +241,12 @@ def evaluate(args, policy: StackPolicy) -> int:
         "policy": args.policy,
         "episodes": len(results),
         "pc_success": 100.0 * sum(r.success for r in results) / len(results),
+        "pc_success_ci95": [100.0 * bound for bound in wilson_interval(sum(r.success for r in results), len(results))],
         "avg_sum_reward": float(np.mean(sums)),
         "best_sum_reward": float(np.max(sums)),
         "avg_max_reward": float(np.mean([r.max_reward for r in results])),
         "reward": args.reward,
-        # Steps that ran before their command reached the sim (a heavily loaded machine).
-        "late_commands": env.late_commands,
+        "backend": args.backend,
         "fps": args.fps,
         "episode_time_s": args.episode_time,
     }
@@ -255,7 +259,8 @@ def evaluate(args, policy: StackPolicy) -> int:
             f"reward sum {r.sum_reward:.2f} (max {r.max_reward:.2f})"
         )
     print(
-        f"{len(results)} episode(s): success {summary['pc_success']:.0f} %, mean reward {summary['avg_sum_reward']:.2f}, "
+        f"{len(results)} episode(s): success {summary['pc_success']:.0f} % "
+        f"(95 % interval {summary['pc_success_ci95'][0]:.0f}-{summary['pc_success_ci95'][1]:.0f} %), mean reward {summary['avg_sum_reward']:.2f}, "
         f"best {summary['best_sum_reward']:.2f}; videos and eval_info.json in {output}"
     )
     return 0
@@ -294,7 +299,16 @@ def parser() -> argparse.ArgumentParser:
     ev.add_argument("--eval", type=int, default=0, metavar="N", help="evaluate over N seeded episodes instead")
     ev.add_argument("--seed", type=int, default=0, help="seed of the first episode (then seed+1, ...)")
     ev.add_argument("--episode-time", type=float, default=20.0, help="sim seconds before an episode counts as failed")
-    ev.add_argument("--sim-task", default="cube_to_bin", choices=["cube_to_bin", "touch_cube"], help="the sim's task")
+    ev.add_argument(
+        "--sim-task", default="cube_to_bin", choices=["cube_to_bin", "touch_cube", "touch_cube_sparse"], help="the sim's task"
+    )
+    ev.add_argument(
+        "--backend",
+        default="ros",
+        choices=["ros", "inprocess"],
+        help="ros: so101_sim_node in lockstep through the topic contract (the stack's real interface); "
+        "inprocess: the same simulation core in this process (faster, no ROS)",
+    )
     ev.add_argument(
         "--reward",
         choices=["dense", "sparse"],

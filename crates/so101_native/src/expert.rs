@@ -1,0 +1,105 @@
+//! The scripted cube_to_bin expert in-process (so101_core::expert, the planner teleop_node's
+//! expert source uses), for demonstrations at simulation speed: plan from the settled cube, then
+//! joint targets at each instant of the plan, moved at most `max_step` per period.
+
+use nalgebra::Vector3;
+use numpy::{PyArray1, PyReadonlyArray1};
+use pyo3::{exceptions::PyValueError, prelude::*};
+use rand::SeedableRng;
+use rand_chacha::ChaCha8Rng;
+use so101_core::{
+    expert::{cube_yaw, ExpertConfig, Plan, SIM_BIN_IN_WORLD},
+    kinematics::SIM_BASE_IN_WORLD,
+    robot::{follow, JointPositions},
+};
+
+use crate::world::joint_targets;
+
+/// The expert with teleop_node's options: `waypoint_noise` (m) and `action_noise` (rad) are the
+/// standard deviations of its noise, drawn from a generator seeded with `seed`; `max_step` (rad)
+/// is the largest change of a target in one period.
+#[pyclass(module = "so101_native")]
+pub struct Expert {
+    config: ExpertConfig,
+    rng: ChaCha8Rng,
+    max_step: f64,
+    plan: Option<Plan>,
+    last: JointPositions,
+}
+
+fn array<const N: usize>(values: &[f64], what: &str) -> PyResult<[f64; N]> {
+    <[f64; N]>::try_from(values)
+        .ok()
+        .filter(|values| values.iter().all(|value| value.is_finite()))
+        .ok_or_else(|| PyValueError::new_err(format!("{what}: {N} finite numbers, not {values:?}")))
+}
+
+#[pymethods]
+impl Expert {
+    #[new]
+    #[pyo3(signature = (waypoint_noise = 0.0, action_noise = 0.0, seed = 0, max_step = 0.1))]
+    fn new(waypoint_noise: f64, action_noise: f64, seed: u64, max_step: f64) -> PyResult<Self> {
+        for (name, value) in [
+            ("waypoint_noise", waypoint_noise),
+            ("action_noise", action_noise),
+        ] {
+            if !(value.is_finite() && value >= 0.0) {
+                return Err(PyValueError::new_err(format!("{name} {value}: not >= 0")));
+            }
+        }
+        if !(max_step.is_finite() && max_step > 0.0) {
+            return Err(PyValueError::new_err(format!(
+                "max_step {max_step}: not > 0"
+            )));
+        }
+        Ok(Self {
+            config: ExpertConfig::for_scene(
+                Vector3::from(SIM_BASE_IN_WORLD),
+                Vector3::from(SIM_BIN_IN_WORLD),
+                waypoint_noise,
+                action_noise,
+            ),
+            rng: ChaCha8Rng::seed_from_u64(seed),
+            max_step,
+            plan: None,
+            last: [0.0; 6],
+        })
+    }
+
+    /// Plans a pick-and-place from the arm's joint targets (rad) and the cube's world pose
+    /// (position m, orientation w x y z), as /cube/pose gives it. Returns the plan's duration (s);
+    /// ValueError when no grasp reaches the cube.
+    fn plan(
+        &mut self,
+        joints: PyReadonlyArray1<'_, f64>,
+        cube_position: PyReadonlyArray1<'_, f64>,
+        cube_orientation: PyReadonlyArray1<'_, f64>,
+    ) -> PyResult<f64> {
+        let joints = joint_targets(joints.as_slice()?)?;
+        let position: [f64; 3] = array(cube_position.as_slice()?, "cube_position")?;
+        let orientation: [f64; 4] = array(cube_orientation.as_slice()?, "cube_orientation")?;
+        let in_base = Vector3::from(position) - Vector3::from(SIM_BASE_IN_WORLD);
+        let plan = Plan::new(
+            &joints,
+            in_base,
+            cube_yaw(orientation),
+            &self.config,
+            &mut self.rng,
+        )
+        .map_err(|error| PyValueError::new_err(error.to_string()))?;
+        let duration = plan.duration();
+        self.plan = Some(plan);
+        self.last = joints;
+        Ok(duration)
+    }
+
+    /// Joint targets (rad) `t` seconds into the plan (held at its end).
+    fn targets_at<'py>(&mut self, py: Python<'py>, t: f64) -> PyResult<Bound<'py, PyArray1<f64>>> {
+        let Some(plan) = &mut self.plan else {
+            return Err(PyValueError::new_err("no plan: call plan() after a reset"));
+        };
+        let wanted = plan.targets_at(t, &self.config, &mut self.rng);
+        self.last = follow(&self.last, &wanted, self.max_step);
+        Ok(PyArray1::from_slice(py, &self.last))
+    }
+}

@@ -1,0 +1,43 @@
+//! `so101_native`: the simulation core (so101_sim) as a Python extension. Worlds step, reset with
+//! a seed, observe and render in-process; a batch steps many worlds in one call across threads;
+//! the scripted expert plans in-process. The GIL is released while the physics or the renderer
+//! works. so101.sim_env builds the Gymnasium environments on it.
+
+mod batch;
+mod cameras;
+mod expert;
+mod world;
+
+use pyo3::prelude::*;
+
+#[pymodule]
+fn so101_native(module: &Bound<'_, PyModule>) -> PyResult<()> {
+    module.add_class::<world::World>()?;
+    module.add_class::<batch::WorldBatch>()?;
+    module.add_class::<expert::Expert>()?;
+    module.add("STATE_SIZE", so101_sim::env::STATE_SIZE)?;
+    module.add("SETTLE_SECONDS", so101_sim::env::SETTLE_SECONDS)?;
+    module.add_function(wrap_pyfunction!(mujoco_version, module)?)?;
+    module.add_function(wrap_pyfunction!(scene_xml, module)?)?;
+    Ok(())
+}
+
+/// Version of the MuJoCo library the worlds run on ("2.2.2").
+#[pyfunction]
+fn mujoco_version() -> String {
+    so101_sim::mujoco::version()
+}
+
+/// The MJCF text of the scene as the worlds load it (its lite variant with `lite`), for stepping
+/// the same scene elsewhere (the benchmark's MuJoCo-bindings anchor).
+#[pyfunction]
+#[pyo3(signature = (scene, lite = true))]
+fn scene_xml(scene: &str, lite: bool) -> PyResult<String> {
+    let xml = std::fs::read_to_string(scene)
+        .map_err(|error| pyo3::exceptions::PyOSError::new_err(format!("{scene}: {error}")))?;
+    if !lite {
+        return Ok(xml);
+    }
+    so101_sim::scene::lite_variant(&xml)
+        .map_err(|error| pyo3::exceptions::PyValueError::new_err(format!("{scene}: {error}")))
+}

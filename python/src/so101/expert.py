@@ -1,0 +1,58 @@
+"""The scripted cube_to_bin expert in-process, as a policy over the Gymnasium environments'
+observations (so101.sim_env): demonstrations for behaviour cloning at simulation speed.
+
+It is teleop_node's expert (the planner in so101_core::expert, called through so101_native):
+from the settled cube's pose, a grasp from above, a lift, a carry over the bin and a release, as
+timed waypoints turned into joint targets by the shared IK, each target moved at most `max_step`
+rad per period. The noise options are teleop_node's (--waypoint-noise, --action-noise).
+
+    env = gym.make("so101/CubeToBin-v0")
+    expert = ExpertPolicy(waypoint_noise=0.005, action_noise=0.01, seed=1)
+    observation, _ = env.reset(seed=0)
+    expert.reset(observation)
+    while True:
+        observation, reward, terminated, truncated, info = env.step(expert(observation))
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .sim_env import CONTROL_RATE
+
+
+class ExpertPolicy:
+    def __init__(
+        self,
+        waypoint_noise: float = 0.0,
+        action_noise: float = 0.0,
+        seed: int = 0,
+        max_step: float = 0.1,
+        control_rate: float = CONTROL_RATE,
+    ):
+        import so101_native
+
+        self._expert = so101_native.Expert(waypoint_noise=waypoint_noise, action_noise=action_noise, seed=seed, max_step=max_step)
+        self._period = 1.0 / control_rate
+        self._steps = 0
+        self.duration = 0.0
+
+    def reset(self, observation: dict) -> float:
+        """Plans the episode from its first observation (the arm's joints, the cube's pose).
+        Returns the plan's duration (s); ValueError when no grasp reaches the cube."""
+        cube = np.asarray(observation["environment_state"], dtype=np.float64)
+        self.duration = self._expert.plan(
+            np.asarray(observation["agent_pos"], dtype=np.float64), cube[:3].copy(), cube[3:7].copy()
+        )
+        self._steps = 0
+        return self.duration
+
+    def __call__(self, observation: dict | None = None) -> np.ndarray:
+        """The joint targets of the next control period (rad, float32[6])."""
+        self._steps += 1
+        return self._expert.targets_at(self._steps * self._period).astype(np.float32)
+
+    @property
+    def done(self) -> bool:
+        """The plan has been played to its end (the cube released over the bin)."""
+        return self._steps * self._period >= self.duration
