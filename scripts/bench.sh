@@ -8,6 +8,7 @@
 #   scripts/bench.sh cameras [--repeats N] [--seconds S] [--frames N] [--json FILE]
 #   scripts/bench.sh expert [--episodes N] [--speed S] [--seed N] [--json FILE]
 #   scripts/bench.sh convert [--episodes N] [--sizes WxH,...] [--json FILE]
+#   scripts/bench.sh storage [--qualities Q,...] [--episodes N] [--long-minutes M] [--converter-src DIR] [--json FILE]
 set -euo pipefail
 . "$(dirname "${BASH_SOURCE[0]}")/common.sh"
 help_if_asked "${BASH_SOURCE[0]}" "$@"
@@ -18,7 +19,7 @@ run() {
         --bin-dir "${CARGO_TARGET_DIR}/release" "${@:2}"
 }
 case "${1:-all}" in
-    sim | sim_core | driver | recorder | cameras | expert | convert) run "$@" ;;
-    all) run sim && run sim_core && run driver && run recorder && run cameras && run expert && run convert ;;
-    *) echo "usage: scripts/bench.sh [sim|sim_core|driver|recorder|cameras|expert|convert] [ARGS...]" >&2; exit 2 ;;
+    sim | sim_core | driver | recorder | cameras | expert | convert | storage) run "$@" ;;
+    all) run sim && run sim_core && run driver && run recorder && run cameras && run expert && run convert && run storage ;;
+    *) echo "usage: scripts/bench.sh [sim|sim_core|driver|recorder|cameras|expert|convert|storage] [ARGS...]" >&2; exit 2 ;;
 esac

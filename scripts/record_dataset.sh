@@ -4,9 +4,12 @@
 # dataset, and print a summary (episodes, successes, frames, where the dataset is).
 #
 #   scripts/record_dataset.sh [--episodes N] [--output DIR] [--seed S] [--lite] [--cameras SPEC]
+#                             [--raw-images | --jpeg-quality Q]
 #
 # Defaults: 5 episodes, the three cameras at 640x480 and 30 Hz, meshes on, output
-# runs/dataset-<time>/ (bags/, dataset/, logs/). Everything with DDS runs in scripts/isolated.
+# runs/dataset-<time>/ (bags/, dataset/, logs/). The bags keep the cameras' JPEG frames
+# (image_raw/compressed, so101-launch's default quality); --raw-images keeps the raw frames instead
+# (10x the disk). Everything with DDS runs in scripts/isolated.
 set -euo pipefail
 
 . "$(dirname "${BASH_SOURCE[0]}")/common.sh"
@@ -25,6 +28,8 @@ while [ $# -gt 0 ]; do
         --seed) seed="$2"; shift 2 ;;
         --lite) launch_args+=(--lite); shift ;;
         --cameras) sim_args+=(--cameras "$2"); shift 2 ;;
+        --raw-images) launch_args+=(--raw-images); shift ;;
+        --jpeg-quality) launch_args+=(--jpeg-quality "$2"); shift 2 ;;
         -h|--help) usage; exit 0 ;;
         *) echo "record_dataset.sh: unknown argument $1 (--help)" >&2; exit 2 ;;
     esac
@@ -50,7 +55,7 @@ cat <<SUMMARY
 
 Summary: $(grep -m1 'episode(s)' "${output}/convert.txt")
   dataset:  ${dataset} (repo id local/so101_cube_to_bin, LeRobot v3.0)
-  bags:     ${output}/bags     logs: ${output}/logs
+  bags:     ${output}/bags ($(du -sh "${output}/bags" | cut -f1))     logs: ${output}/logs
 Next: train a policy on it, then run it on the sim:
   cd ${REPO_ROOT}
   .venv/bin/lerobot-train --dataset.repo_id=local/so101_cube_to_bin --dataset.root=${dataset} \\

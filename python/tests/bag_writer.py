@@ -35,6 +35,10 @@ DEFINITIONS = {
         "std_msgs/Header header\nuint32 height\nuint32 width\nstring encoding\nuint8 is_bigendian\nuint32 step\nuint8[] data\n",
         [("std_msgs/Header", HEADER), ("builtin_interfaces/Time", TIME)],
     ),
+    "sensor_msgs/msg/CompressedImage": (
+        "std_msgs/Header header\nstring format\nuint8[] data\n",
+        [("std_msgs/Header", HEADER), ("builtin_interfaces/Time", TIME)],
+    ),
     "geometry_msgs/msg/PoseStamped": (
         "std_msgs/Header header\ngeometry_msgs/Pose pose\n",
         [
@@ -94,7 +98,8 @@ class EpisodeBag:
             {"layout": {"dim": [], "data_offset": 0}, "data": [float(v) for v in values]},
         )
 
-    def image(self, t: float, camera: str, width: int, height: int, value: int = 0) -> None:
+    def image(self, t: float, camera: str, width: int, height: int, value: int = 0, pixels: bytes | None = None) -> None:
+        """An rgb8 sensor_msgs/Image: every byte `value`, or `pixels` (height x width x 3 bytes)."""
         self.add(
             t,
             "/" + contract.camera_topic(camera),
@@ -106,8 +111,18 @@ class EpisodeBag:
                 "encoding": "rgb8",
                 "is_bigendian": 0,
                 "step": width * 3,
-                "data": bytes([value % 256]) * (width * height * 3),
+                "data": pixels if pixels is not None else bytes([value % 256]) * (width * height * 3),
             },
+        )
+
+    def compressed_image(self, t: float, camera: str, data: bytes, format: str = "rgb8; jpeg compressed bgr8") -> None:
+        """A sensor_msgs/CompressedImage on /camera/CAMERA/image_raw/compressed, as image_transport
+        publishes it (`data`: the JPEG or PNG file's bytes)."""
+        self.add(
+            t,
+            "/" + contract.camera_topic(camera, contract.IMAGE_COMPRESSED),
+            "sensor_msgs/msg/CompressedImage",
+            {"header": header(t), "format": format, "data": data},
         )
 
     def cube(self, t: float, x: float = 0.2, y: float = 0.0, z: float = 0.0125) -> None:

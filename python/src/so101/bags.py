@@ -1,10 +1,20 @@
 """Reading recorder_node's episode bags: one directory per episode with metadata.yaml and its MCAP
 file(s), read with the `mcap` and `mcap-ros2-support` packages. The layout's rules are
 so101_core::episode_bag's (names and keys from so101.contract; both tested against
-tests/fixtures/episode_bags.txt)."""
+tests/fixtures/episode_bags.txt).
+
+Camera frames are read twice, never all at once: `read_episode` goes through the files keeping
+every stream's times and the small values (joint states, commands, cube pose, reward, success),
+but of each camera frame only a reference (its place in the file, its size); `camera_frames` then
+goes through the files again and hands out the frames the converter asks for, frame after frame,
+holding only those still to be handed out. Memory does not grow with the episode's length.
+Cameras may be recorded raw (sensor_msgs/Image on /camera/NAME/image_raw) or compressed
+(sensor_msgs/CompressedImage, JPEG or PNG, on /camera/NAME/image_raw/compressed, the default of
+so101-launch); a camera recorded both ways is read raw."""
 
 from __future__ import annotations
 
+from collections.abc import Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -13,7 +23,7 @@ import yaml
 
 from . import contract
 from .commands import CommandError, obeyed_targets, targets_from_array, targets_from_joint_state
-from .messages import cube_pose_vector, joint_positions, rgb_image
+from .messages import cube_pose_vector, image_size, joint_positions
 
 
 class BagError(Exception):
@@ -26,6 +36,16 @@ class Stream:
 
     times: list[float] = field(default_factory=list)
     values: list = field(default_factory=list)
+
+
+@dataclass(frozen=True, slots=True)
+class FrameRef:
+    """One camera frame of a bag, not decoded: its place among its topic's messages in the order
+    the files are read, and its size."""
+
+    ordinal: int
+    width: int
+    height: int
 
 
 @dataclass
@@ -41,7 +61,12 @@ class Episode:
     # The cube's pose from /cube/pose, stamped: float64[7] position (m) and orientation (w x y z),
     # world frame (empty when the bag has no /cube/pose).
     cube_pose: Stream
+    # Per camera: the frames' stamps and FrameRefs (camera_frames decodes them).
     cameras: dict[str, Stream]
+    # Per camera: the topic its frames come from (raw or compressed).
+    camera_topics: dict[str, str] = field(default_factory=dict)
+    # The episode's MCAP files, in the order they are read.
+    files: list[Path] = field(default_factory=list)
     # Command messages the nodes would have rejected (so101.commands), with the first reasons.
     rejected_commands: int = 0
     rejection_reasons: list[str] = field(default_factory=list)
@@ -87,13 +112,48 @@ def _stamp(header) -> float:
     return header.stamp.sec + header.stamp.nanosec * 1e-9
 
 
-def read_episode(path: Path, cameras: list[str] | None) -> Episode:
-    """Everything of one episode the converter uses, in sim time. Raises BagError for an episode
-    that was not closed (no metadata.yaml: the recorder was killed), an unreadable file, or one
-    that misses a stream."""
+def _messages(files: list[Path]) -> Iterator[tuple[Path, str, object, object]]:
+    """(file, topic, MCAP message record, decode) of every message of `files`, file after file, each in
+    log-time order when the file is indexed (a heap over its chunks: one chunk or so in memory) and
+    in stored order when it is not (ordering an unindexed file would load it whole); `decode(record)`
+    gives the ROS message. Both passes of an episode read it so, in the same order."""
     from mcap.reader import make_reader
     from mcap_ros2.decoder import DecoderFactory
 
+    for file in files:
+        with open(file, "rb") as stream:
+            reader = make_reader(stream)
+            summary = reader.get_summary()
+            indexed = summary is not None and len(summary.chunk_indexes) > 0
+            factory = DecoderFactory()  # per file: schema ids are the file's own
+            decoders: dict[int, object] = {}
+            for schema, channel, record in reader.iter_messages(log_time_order=indexed):
+                decoder = decoders.get(channel.id)
+                if decoder is None:
+                    decoder = factory.decoder_for(channel.message_encoding, schema)
+                    if decoder is None:
+                        continue  # not CDR with a ros2msg schema: nothing the converter reads
+                    decoders[channel.id] = decoder
+                yield file, channel.topic, record, decoder
+
+
+def camera_of(topic: str) -> tuple[str, bool] | None:
+    """(camera name, compressed) of a camera frame topic (/camera/NAME/image_raw or
+    /camera/NAME/image_raw/compressed, under any namespace), None for other topics."""
+    for leaf, compressed in ((contract.IMAGE_COMPRESSED, True), (contract.IMAGE_RAW, False)):
+        if topic.endswith("/" + leaf):
+            parts = topic[: -len(leaf) - 1].split("/")
+            if len(parts) >= 2 and parts[-2] == contract.CAMERA_PREFIX and parts[-1]:
+                return parts[-1], compressed
+    return None
+
+
+def read_episode(path: Path, cameras: list[str] | None) -> Episode:
+    """Everything of one episode the converter uses, in sim time, camera frames as FrameRefs
+    (camera_frames decodes them). Raises BagError for an episode that was not closed (no
+    metadata.yaml: the recorder was killed), an unreadable file, one that misses a stream, or a
+    camera frame that cannot be decoded (an unknown encoding or format, data that is no image) or
+    that changes size."""
     metadata_file = path / contract.EPISODE_METADATA_FILE
     if not metadata_file.is_file():
         raise BagError(f"{path.name}: no metadata.yaml (the recording was cut short); its bag may be truncated")
@@ -121,57 +181,58 @@ def read_episode(path: Path, cameras: list[str] | None) -> Episode:
     raw_reward: list[tuple[float, float]] = []
     raw_success: list[tuple[float, bool]] = []
     raw_cube: list[tuple[float, np.ndarray]] = []
-    raw_images: dict[str, list[tuple[float, np.ndarray]]] = {}
-    for file in files:
-        try:
-            with open(file, "rb") as stream:
-                reader = make_reader(stream, decoder_factories=[DecoderFactory()])
-                for _schema, channel, message, ros in reader.iter_decoded_messages(log_time_order=True):
-                    received = message.log_time * 1e-9
-                    topic = channel.topic
-                    if topic.endswith("/" + contract.JOINT_STATES) and not topic.endswith(contract.LEADER_JOINT_STATES):
-                        positions = joint_positions(ros)
-                        if positions is not None:
-                            raw_states.append((received, _stamp(ros.header), positions))
-                    elif topic.endswith("/" + contract.JOINT_COMMANDS) or topic.endswith(
-                        "/" + contract.FORWARD_POSITION_COMMANDS
-                    ):
-                        # A node drains /joint_commands before the array topic in each tick.
-                        array = topic.endswith("/" + contract.FORWARD_POSITION_COMMANDS)
-                        try:
-                            if array:
-                                targets = targets_from_array(list(ros.data))
-                            else:
-                                targets = targets_from_joint_state(list(ros.name), list(ros.position))
-                        except CommandError as error:
-                            targets = f"{topic}: {error}"
-                        raw_commands.append((received, int(array), targets))
-                    elif topic.endswith("/" + contract.TASK_REWARD):
-                        raw_reward.append((received, float(ros.data)))
-                    elif topic.endswith("/" + contract.TASK_SUCCESS):
-                        raw_success.append((received, bool(ros.data)))
-                    elif topic.endswith("/" + contract.CUBE_POSE):
-                        raw_cube.append((_stamp(ros.header), cube_pose_vector(ros.pose)))
-                    elif f"/{contract.CAMERA_PREFIX}/" in topic and topic.endswith("/" + contract.IMAGE_RAW):
-                        name = topic.rstrip("/").split("/")[-2]
-                        if cameras is not None and name not in cameras:
-                            continue
-                        try:
-                            image = rgb_image(ros)
-                        except ValueError as error:
-                            raise BagError(f"{path.name}: {topic}: {error}") from error
-                        frames = raw_images.setdefault(name, [])
-                        if frames and frames[0][1].shape != image.shape:
-                            first, now = frames[0][1].shape, image.shape
-                            raise BagError(
-                                f"{path.name}: camera {name!r} changed size from {first[1]}x{first[0]} "
-                                f"to {now[1]}x{now[0]} at t={_stamp(ros.header):.3f} s"
-                            )
-                        frames.append((_stamp(ros.header), image))
-        except BagError:
-            raise
-        except Exception as error:  # noqa: BLE001 - a damaged file is reported, not fatal
-            raise BagError(f"{path.name}: cannot read {file.name} ({type(error).__name__}: {error})") from error
+    # Per camera topic: (stamp, FrameRef) in the order read.
+    raw_images: dict[str, list[tuple[float, FrameRef]]] = {}
+    file = files[0]  # the one being read, for the error message
+    try:
+        for in_file, topic, record, decode in _messages(files):
+            file = in_file
+            received = record.log_time * 1e-9
+            camera = camera_of(topic)
+            if camera is not None:
+                if cameras is not None and camera[0] not in cameras:
+                    continue
+                frames = raw_images.setdefault(topic, [])
+                ros = decode(record.data)
+                try:
+                    width, height = image_size(ros)
+                except ValueError as error:
+                    raise BagError(f"{path.name}: {topic}: {error}") from error
+                if frames and (frames[0][1].width, frames[0][1].height) != (width, height):
+                    first = frames[0][1]
+                    raise BagError(
+                        f"{path.name}: camera {camera[0]!r} changed size from {first.width}x{first.height} "
+                        f"to {width}x{height} at t={_stamp(ros.header):.3f} s"
+                    )
+                frames.append((_stamp(ros.header), FrameRef(len(frames), width, height)))
+            elif topic.endswith("/" + contract.JOINT_STATES) and not topic.endswith(contract.LEADER_JOINT_STATES):
+                ros = decode(record.data)
+                positions = joint_positions(ros)
+                if positions is not None:
+                    raw_states.append((received, _stamp(ros.header), positions))
+            elif topic.endswith("/" + contract.JOINT_COMMANDS) or topic.endswith("/" + contract.FORWARD_POSITION_COMMANDS):
+                ros = decode(record.data)
+                # A node drains /joint_commands before the array topic in each tick.
+                array = topic.endswith("/" + contract.FORWARD_POSITION_COMMANDS)
+                try:
+                    if array:
+                        targets = targets_from_array(list(ros.data))
+                    else:
+                        targets = targets_from_joint_state(list(ros.name), list(ros.position))
+                except CommandError as error:
+                    targets = f"{topic}: {error}"
+                raw_commands.append((received, int(array), targets))
+            elif topic.endswith("/" + contract.TASK_REWARD):
+                raw_reward.append((received, float(decode(record.data).data)))
+            elif topic.endswith("/" + contract.TASK_SUCCESS):
+                raw_success.append((received, bool(decode(record.data).data)))
+            elif topic.endswith("/" + contract.CUBE_POSE):
+                ros = decode(record.data)
+                raw_cube.append((_stamp(ros.header), cube_pose_vector(ros.pose)))
+    except BagError:
+        raise
+    except Exception as error:  # noqa: BLE001 - a damaged file is reported, not fatal
+        raise BagError(f"{path.name}: cannot read {file.name} ({type(error).__name__}: {error})") from error
 
     if len(raw_states) < 2:
         raise BagError(f"{path.name}: no /joint_states (observation.state)")
@@ -181,8 +242,12 @@ def read_episode(path: Path, cameras: list[str] | None) -> Episode:
     if not accepted:
         detail = f" ({len(reasons)} rejected, e.g. {reasons[0]})" if reasons else ""
         raise BagError(f"{path.name}: no valid /joint_commands or /forward_position_controller/commands (action){detail}")
+    # One topic per camera: the raw one where a camera was recorded both ways (lossless).
+    camera_topics: dict[str, str] = {}
+    for topic in sorted(raw_images, key=lambda topic: camera_of(topic)[1]):
+        camera_topics.setdefault(camera_of(topic)[0], topic)
     for name in cameras or []:
-        if not raw_images.get(name):
+        if name not in camera_topics:
             raise BagError(f"{path.name}: no frames of camera {name!r}")
 
     from .resample import WallToSim
@@ -211,7 +276,48 @@ def read_episode(path: Path, cameras: list[str] | None) -> Episode:
         reward=stream(raw_reward),
         task_success=stream(raw_success),
         cube_pose=stream(raw_cube, stamped=True),
-        cameras={name: stream(frames, stamped=True) for name, frames in sorted(raw_images.items())},
+        cameras={name: stream(raw_images[topic], stamped=True) for name, topic in sorted(camera_topics.items())},
+        camera_topics=dict(sorted(camera_topics.items())),
+        files=files,
         rejected_commands=len(reasons),
         rejection_reasons=reasons[:3],
     )
+
+
+def camera_frames(episode: Episode, plan: dict[str, list[FrameRef]]) -> Iterator[dict[str, object]]:
+    """The ROS messages (Image or CompressedImage, not decoded into pixels) of the frames `plan`
+    names, frame after frame: for frame k, {camera: the message of plan[camera][k]}. The episode's
+    files are read once more, in read_episode's order; a message is kept from where it is read
+    until the last frame that uses it has been handed out, so memory holds the frames of about one
+    instant (more only where one camera's frames were received far behind another's). Raises
+    BagError when a planned frame is not found (the files changed since read_episode)."""
+    count = len(next(iter(plan.values()), []))
+    if not count:
+        return
+    wanted = {episode.camera_topics[name]: name for name in plan}
+    # The last frame that uses each planned message, per camera.
+    last_use = {name: {} for name in plan}
+    for name, refs in plan.items():
+        for k, ref in enumerate(refs):
+            last_use[name][ref.ordinal] = k
+    held: dict[str, dict[int, object]] = {name: {} for name in plan}
+    ordinals = dict.fromkeys(plan, 0)
+    k = 0
+    for _file, topic, record, decode in _messages(episode.files):
+        name = wanted.get(topic)
+        if name is None:
+            continue
+        ordinal = ordinals[name]
+        ordinals[name] += 1
+        if ordinal in last_use[name]:
+            held[name][ordinal] = decode(record.data)
+        while k < count and all(plan[n][k].ordinal in held[n] for n in plan):
+            yield {n: held[n][plan[n][k].ordinal] for n in plan}
+            for n in plan:
+                ordinal = plan[n][k].ordinal
+                if last_use[n][ordinal] == k:
+                    del held[n][ordinal]
+            k += 1
+        if k == count:
+            return
+    raise BagError(f"{episode.path.name}: {count - k} planned camera frame(s) not found on the second read")

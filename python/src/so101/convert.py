@@ -10,6 +10,10 @@ observation.images.<camera> (video), next.reward, next.success, and the episode'
 missing, a camera changing size, malformed metadata) is reported and skipped; the others are
 converted. A silence longer than --max-gap in the joint states, cube pose or a camera splits an
 episode into parts, each converted as an episode of its own when it has at least two frames.
+Cameras recorded raw (sensor_msgs/Image) or compressed (sensor_msgs/CompressedImage, JPEG or PNG:
+so101-launch's default) alike. Episodes are streamed: a first read of a bag keeps every stream's
+times and small values, a second decodes only the camera frames that go into the dataset, one
+dataset frame at a time, so memory does not grow with an episode's length.
 """
 
 from __future__ import annotations
@@ -23,7 +27,8 @@ from pathlib import Path
 
 import numpy as np
 
-from .bags import BagError, Episode, episode_dirs, read_episode
+from .bags import BagError, Episode, camera_frames, episode_dirs, read_episode
+from .messages import rgb_image
 from .resample import frame_times, gaps, parts_between, sample_and_hold
 from .units import FEATURE_NAMES, lerobot_from_radians
 
@@ -41,7 +46,7 @@ class Frames:
     action: np.ndarray  # [N, 6] float32
     reward: np.ndarray  # [N] float32
     success: np.ndarray  # [N] bool
-    images: dict[str, list[np.ndarray]]
+    images: dict[str, list]  # per camera, the FrameRef of each frame (bags.camera_frames reads them)
     environment_state: np.ndarray | None  # [N, 7] float32 cube pose, or None
 
 
@@ -101,7 +106,7 @@ def stamped_streams(episode: Episode, environment_state: bool) -> dict[str, list
     streams = {"/joint_states": episode.joint_states.times}
     if environment_state:
         streams["/cube/pose"] = episode.cube_pose.times
-    streams.update({f"/camera/{name}/image_raw": stream.times for name, stream in episode.cameras.items()})
+    streams.update({episode.camera_topics[name]: stream.times for name, stream in episode.cameras.items()})
     return streams
 
 
@@ -200,6 +205,68 @@ def quiet_video_encoder() -> None:
     av.logging.set_level(av.logging.WARNING)
 
 
+class PartError(Exception):
+    """Why one episode (or part) cannot be written: a camera frame that does not decode, a frame
+    LeRobot refuses, a bag that cannot be read a second time."""
+
+
+def write_part(dataset, frames: Frames, task: str, images, image_size, label: str) -> str | None:
+    """Adds the frames of one episode (or part) to the dataset's episode buffer, each camera frame
+    decoded when its dataset frame is written, from `images` (bags.camera_frames over the parts
+    being written; advanced by exactly this part's frames whatever happens). Returns None, or why
+    the part was left out (then nothing of it stays in the buffer)."""
+    count = len(frames.state)
+    decoded: dict[str, tuple[int, np.ndarray]] = {}  # per camera, the last frame decoded (a held frame repeats)
+    read = 0  # frames taken from `images`
+    try:
+        for k in range(count):
+            try:
+                messages = next(images) if images is not None else {}
+            except (BagError, StopIteration) as error:
+                read = count  # the reader is done for: nothing left to pass over
+                raise PartError(f"cannot read the camera frames again ({str(error).split(': ', 1)[-1]})") from error
+            read += 1
+            frame = {
+                "observation.state": frames.state[k],
+                "action": frames.action[k],
+                "next.reward": frames.reward[k : k + 1],
+                "next.success": frames.success[k : k + 1],
+                "task": task,
+            }
+            if frames.environment_state is not None:
+                frame["observation.environment_state"] = frames.environment_state[k]
+            for name, message in messages.items():
+                ordinal = frames.images[name][k].ordinal
+                if decoded.get(name, (None,))[0] != ordinal:
+                    try:
+                        image = rgb_image(message)
+                    except ValueError as error:
+                        raise PartError(f"camera {name!r}: the frame at t={stamp_of(message):.3f} s: {error}") from error
+                    if image_size:
+                        image = resized([image], *image_size)[0]
+                    decoded[name] = (ordinal, image)
+                frame[f"observation.images.{name}"] = decoded[name][1]
+            try:
+                dataset.add_frame(frame)
+            except Exception as error:  # noqa: BLE001 - LeRobot's frame validation: this part only
+                raise PartError(f"refused by LeRobot ({type(error).__name__}: {error})") from error
+    except PartError as error:
+        # Nothing of the part is saved: its buffer (and images written so far) is dropped, and the
+        # rest of its camera frames are passed over, so the next part reads its own.
+        dataset.clear_episode_buffer()
+        try:
+            for _ in range(count - read):
+                next(images)
+        except (BagError, StopIteration):
+            pass
+        return f"{label}: {error}"
+    return None
+
+
+def stamp_of(message) -> float:
+    return message.header.stamp.sec + message.header.stamp.nanosec * 1e-9
+
+
 def convert(args) -> int:
     from lerobot.datasets.lerobot_dataset import LeRobotDataset
     from tqdm import tqdm
@@ -249,8 +316,6 @@ def convert(args) -> int:
                     log.warning("%s", note)
                     notes.append(note)
                     continue
-                if args.image_size:
-                    frames.images = {name: resized(images, *args.image_size) for name, images in frames.images.items()}
                 all_frames.append((label, episode.task or args.task, frames))
             if not all_frames:
                 raise BagError(f"{path.name}: no part of it long enough after splitting at gaps")
@@ -258,8 +323,12 @@ def convert(args) -> int:
             log.warning("skipped %s", error)
             skipped.append(str(error))
             continue
+        # The checks that need no pixels, on every part before any frame is written.
+        accepted = []
         for label, task, frames in all_frames:
-            shapes = {name: images[0].shape[:2] for name, images in frames.images.items()}
+            shapes = {name: (refs[0].height, refs[0].width) for name, refs in frames.images.items()}
+            if args.image_size:
+                shapes = {name: (args.image_size[1], args.image_size[0]) for name in shapes}
             narrow = {name: width for name, (_, width) in shapes.items() if width < MIN_VIDEO_WIDTH}
             if narrow and not args.no_videos:
                 error = (
@@ -286,24 +355,13 @@ def convert(args) -> int:
                 log.warning("skipped %s", error)
                 skipped.append(error)
                 continue
-            try:
-                for k in range(len(frames.state)):
-                    frame = {
-                        "observation.state": frames.state[k],
-                        "action": frames.action[k],
-                        "next.reward": frames.reward[k : k + 1],
-                        "next.success": frames.success[k : k + 1],
-                        "task": task,
-                    }
-                    if frames.environment_state is not None:
-                        frame["observation.environment_state"] = frames.environment_state[k]
-                    for name, images in frames.images.items():
-                        frame[f"observation.images.{name}"] = images[k]
-                    dataset.add_frame(frame)
-            except Exception as error:  # noqa: BLE001 - LeRobot's frame validation: this episode only
-                # Nothing of the episode is saved: its buffer (and images written so far) is dropped.
-                dataset.clear_episode_buffer()
-                reason = f"{label}: refused by LeRobot ({type(error).__name__}: {error})"
+            accepted.append((label, task, frames))
+        # The camera frames of every accepted part, read from the bag frame after frame.
+        plan = {name: [ref for _, _, frames in accepted for ref in frames.images[name]] for name in cameras or []}
+        images = camera_frames(episode, plan) if plan and accepted else None
+        for label, task, frames in accepted:
+            reason = write_part(dataset, frames, task, images, args.image_size, label)
+            if reason:
                 log.warning("skipped %s", reason)
                 skipped.append(reason)
                 continue

@@ -7,7 +7,11 @@
   control:  teleop (teleop_node: keyboard, gamepad or leader arm), expert (the scripted expert,
             --episodes N), policy (so101-run-policy with --policy), or none
   --record: recorder_node, one bag per episode into --bags (the expert and the keyboard mark the
-            episodes; with a policy, one episode from start to stop)
+            episodes; with a policy, one episode from start to stop). Cameras are recorded
+            compressed: the sim also publishes JPEG (--jpeg-quality, default 100) and the recorder
+            keeps /camera/NAME/image_raw/compressed instead of the raw images (8 MB per second of
+            robot time for the three 640x480 cameras at 30 Hz instead of 83, at 52 dB PSNR);
+            --raw-images records the raw sensor_msgs/Image frames instead
   --tf:     so101_state_publisher (/robot_description and /tf, for RViz)
   --rerun:  so101_rerun live into a viewer it starts (spawn), a running one (connect[=URL]) or a
             FILE.rrd
@@ -49,6 +53,33 @@ from .paths import asset, isolated_wrapper, node_binary, node_environment
 # The arm `--robot real --emulate` emulates unless the user names a calibration.
 EMULATED_ARM_CALIBRATION = "emulated_arm/so101_calibration.json"  # under assets/
 
+# JPEG quality of the recorded camera frames (docs/benchmarks.md, "Recording size": the best
+# fidelity within 10 MB per second of robot time for the three default cameras).
+DEFAULT_JPEG_QUALITY = 100
+# What the recorder keeps by default with compressed cameras: recorder_node's default set
+# (crates/recorder_node/src/topics.rs DEFAULT_PATTERNS; a unit test holds the two together) with
+# the cameras' compressed topics in place of their raw images.
+COMPRESSED_RECORDING = [
+    "joint_states",
+    "joint_commands",
+    "forward_position_controller/commands",
+    "leader/joint_states",
+    f"{contract.CAMERA_PREFIX}/[^/]+/{contract.IMAGE_COMPRESSED}",
+    f"{contract.CAMERA_PREFIX}/[^/]+/{contract.CAMERA_INFO}",
+    "task/reward",
+    "task/success",
+    "cube/pose",
+    "episode/events",
+    "diagnostics",
+]
+# recorder_node flags that choose the topics themselves (then the launcher adds none).
+RECORDER_TOPIC_FLAGS = ("--topics", "--all", "--regex")
+
+
+def has_flag(argv: list[str], flag: str) -> bool:
+    """`flag` among `argv`, alone or as `flag=VALUE`."""
+    return any(arg == flag or arg.startswith(flag + "=") for arg in argv)
+
 
 @dataclass
 class NodeSpec:
@@ -80,7 +111,12 @@ def plan(args) -> list[NodeSpec]:
             sim.append("--lite")
         if args.speed:
             sim += ["--speed", args.speed]
-        sim += shlex.split(args.sim_args)
+        extra = shlex.split(args.sim_args)
+        if args.record and not args.raw_images:
+            # The JPEG frames the recorder keeps (the raw ones are still published for live peers).
+            sim += [] if has_flag(extra, "--jpeg") else ["--jpeg"]
+            sim += [] if has_flag(extra, "--jpeg-quality") else ["--jpeg-quality", str(args.jpeg_quality)]
+        sim += extra
         specs.append(NodeSpec("so101_sim_node", sim, ready="publisher /joint_states"))
     else:
         port = args.port
@@ -141,7 +177,11 @@ def plan(args) -> list[NodeSpec]:
         recorder = [str(node_binary("recorder_node")), "--output", args.bags, "--task", args.task, *ns]
         if args.control == "policy":
             recorder.append("--start")  # no one marks episodes: one from start to stop
-        recorder += shlex.split(args.recorder_args)
+        extra = shlex.split(args.recorder_args)
+        if not args.raw_images and not any(has_flag(extra, flag) for flag in RECORDER_TOPIC_FLAGS):
+            for pattern in COMPRESSED_RECORDING:
+                recorder += ["--regex", pattern]
+        recorder += extra
         specs.append(NodeSpec("recorder_node", recorder, ready="subscriber /episode/events"))
 
     if args.control in ("teleop", "expert"):
@@ -379,7 +419,25 @@ def parser() -> argparse.ArgumentParser:
     )
     record = p.add_argument_group("recording")
     record.add_argument("--bags", default="bags", help="directory of the episode bags")
-    record.add_argument("--recorder-args", default="", help="more recorder_node flags")
+    record.add_argument(
+        "--raw-images",
+        action="store_true",
+        help="record the cameras' raw sensor_msgs/Image frames (about 83 MB per second of robot time for three "
+        "640x480 cameras at 30 Hz) instead of their JPEG frames on image_raw/compressed",
+    )
+    record.add_argument(
+        "--jpeg-quality",
+        type=int,
+        default=DEFAULT_JPEG_QUALITY,
+        choices=range(1, 101),
+        metavar="1-100",
+        help=f"JPEG quality of the recorded sim camera frames (default {DEFAULT_JPEG_QUALITY})",
+    )
+    record.add_argument(
+        "--recorder-args",
+        default="",
+        help="more recorder_node flags (--topics, --regex or --all choose the topics instead of the launcher)",
+    )
     return p
 
 

@@ -1,0 +1,89 @@
+"""The default recording path keeps compressed camera frames: so101-launch with the expert and the
+recorder (as scripts/record_dataset.sh runs it) records each camera's JPEG frames
+(sensor_msgs/CompressedImage on image_raw/compressed) and not its raw images; rosbags, an
+independent reader, opens the bag and decodes them; so101-bag-to-lerobot converts it into a
+dataset whose video frames are those frames."""
+
+from __future__ import annotations
+
+import io
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import yaml
+
+VENV_BIN = Path(sys.executable).parent
+
+
+def test_the_default_recording_keeps_jpeg_frames_that_rosbags_reads_and_the_converter_converts(tmp_path):
+    from PIL import Image
+    from rosbags.rosbag2 import Reader
+    from rosbags.typesys import Stores, get_typestore
+
+    bags = tmp_path / "bags"
+    done = subprocess.run(
+        [
+            str(VENV_BIN / "so101-launch"),
+            "--control",
+            "expert",
+            "--episodes",
+            "1",
+            "--record",
+            "--bags",
+            str(bags),
+            "--lite",
+            "--sim-args=--cameras top:64x48,wrist:64x48",
+            "--seed",
+            "5",
+            "--log-dir",
+            str(tmp_path / "logs"),
+        ],
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
+    assert done.returncode == 0, done.stdout + done.stderr
+    episode = bags / "episode_000000"
+    info = yaml.safe_load((episode / "metadata.yaml").read_text())["rosbag2_bagfile_information"]
+    types = {t["topic_metadata"]["name"]: t["topic_metadata"]["type"] for t in info["topics_with_message_count"]}
+    for camera in ("top", "wrist"):
+        assert types.get(f"/camera/{camera}/image_raw/compressed") == "sensor_msgs/msg/CompressedImage", types
+        assert f"/camera/{camera}/image_raw" not in types, types
+        assert types.get(f"/camera/{camera}/camera_info") == "sensor_msgs/msg/CameraInfo", types
+    assert {"/joint_states", "/joint_commands", "/cube/pose", "/task/success"} <= set(types), types
+
+    # rosbags: its own metadata.yaml parser, MCAP storage and Jazzy CDR definitions.
+    store = get_typestore(Stores.ROS2_JAZZY)
+    frames: list[tuple[float, np.ndarray]] = []
+    with Reader(episode) as bag:
+        connections = [c for c in bag.connections if c.topic == "/camera/top/image_raw/compressed"]
+        for connection, _, raw in bag.messages(connections=connections):
+            message = store.deserialize_cdr(raw, connection.msgtype)
+            assert message.format == "rgb8; jpeg compressed bgr8", message.format
+            image = Image.open(io.BytesIO(message.data.tobytes()))
+            assert (image.format, image.size) == ("JPEG", (64, 48))
+            frames.append((message.header.stamp.sec + message.header.stamp.nanosec * 1e-9, np.asarray(image.convert("RGB"))))
+    assert len(frames) > 150, len(frames)  # an expert episode is about 8 s at 30 Hz
+
+    output = tmp_path / "dataset"
+    done = subprocess.run(
+        [str(VENV_BIN / "so101-bag-to-lerobot"), str(bags), "--output", str(output), "--repo-id", "local/jpeg", "--quiet"],
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
+    assert done.returncode == 0, done.stdout + done.stderr
+    assert "1 episode(s) (1 successful)" in done.stdout and "0 skipped" in done.stdout and "clean" in done.stdout, done.stdout
+
+    from lerobot.datasets.lerobot_dataset import LeRobotDataset
+
+    dataset = LeRobotDataset("local/jpeg", root=output)
+    assert dataset.features["observation.images.top"]["shape"] == (48, 64, 3)
+    assert abs(dataset.num_frames - len(frames)) <= 3, (dataset.num_frames, len(frames))
+    # A video frame is one of the recorded JPEG frames (AV1 on top of JPEG: close, not equal).
+    item = dataset[dataset.num_frames // 2]
+    video = item["observation.images.top"].numpy().transpose(1, 2, 0) * 255.0
+    errors = [np.abs(video - image).mean() for _, image in frames]
+    assert min(errors) < 8, f"the video frame is none of the recorded frames (closest off by {min(errors):.1f})"
