@@ -526,3 +526,13 @@ TINY_ACT = [
     "--policy.n_encoder_layers=1",
     "--policy.n_decoder_layers=1",
 ]
+
+
+def rrd_entities(path) -> dict[str, int]:
+    """Entity path -> number of rows, read with the rerun SDK."""
+    from rerun.experimental import RrdReader
+
+    rows: dict[str, int] = {}
+    for chunk in RrdReader(str(path)).stream().to_chunks():
+        rows[str(chunk.entity_path)] = rows.get(str(chunk.entity_path), 0) + chunk.num_rows
+    return rows

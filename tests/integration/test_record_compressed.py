@@ -13,6 +13,7 @@ from pathlib import Path
 
 import numpy as np
 import yaml
+from harness import node_binary, node_environment, rrd_entities
 
 VENV_BIN = Path(sys.executable).parent
 
@@ -66,6 +67,19 @@ def test_the_default_recording_keeps_jpeg_frames_that_rosbags_reads_and_the_conv
             assert (image.format, image.size) == ("JPEG", (64, 48))
             frames.append((message.header.stamp.sec + message.header.stamp.nanosec * 1e-9, np.asarray(image.convert("RGB"))))
     assert len(frames) > 150, len(frames)  # an expert episode is about 8 s at 30 Hz
+
+    # so101_rerun logs every compressed frame (as the encoded JPEG) from the bag.
+    rrd = tmp_path / "rrd"
+    done = subprocess.run(
+        [str(node_binary("so101_rerun")), "bag", str(bags), "--output", str(rrd), "--image-rate", "0"],
+        capture_output=True,
+        text=True,
+        timeout=120,
+        env=node_environment(),
+    )
+    assert done.returncode == 0, done.stdout + done.stderr
+    rows = rrd_entities(rrd / "episode_000000.rrd")
+    assert rows.get("/cameras/top") == len(frames), (rows.get("/cameras/top"), len(frames))
 
     output = tmp_path / "dataset"
     done = subprocess.run(

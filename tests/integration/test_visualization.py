@@ -16,6 +16,7 @@ from harness import (
     SimNode,
     node_binary,
     node_environment,
+    rrd_entities,
     scene_body_poses,
     start_and_wait,
     wait_until,
@@ -51,16 +52,6 @@ def run_node(name: str, *args: str, timeout: float = 120.0) -> subprocess.Comple
     return subprocess.run(
         [str(node_binary(name)), *[str(a) for a in args]], capture_output=True, text=True, timeout=timeout, env=node_environment()
     )
-
-
-def rrd_entities(path) -> dict[str, int]:
-    """Entity path -> number of rows, read with the rerun SDK."""
-    from rerun.experimental import RrdReader
-
-    rows: dict[str, int] = {}
-    for chunk in RrdReader(str(path)).stream().to_chunks():
-        rows[str(chunk.entity_path)] = rows.get(str(chunk.entity_path), 0) + chunk.num_rows
-    return rows
 
 
 def scalar_series(path, entity: str) -> np.ndarray:

@@ -6,7 +6,7 @@ use std::path::{Path, PathBuf};
 use byteorder::{BigEndian, LittleEndian};
 use serde::de::DeserializeOwned;
 use so101_msgs::geometry_msgs::PoseStamped;
-use so101_msgs::sensor_msgs::{Image, JointState};
+use so101_msgs::sensor_msgs::{CompressedImage, Image, JointState};
 use so101_msgs::std_msgs::{Bool, Float64};
 
 use crate::bridge::Bridge;
@@ -94,6 +94,8 @@ pub fn replay(episode: &Path, bridge: &mut Bridge) -> Result<BagReport, BagError
                     decode::<Bool>(data).map(|m| bridge.success(m.data))
                 } else if let Some(camera) = camera_name(topic) {
                     decode::<Image>(data).map(|m| bridge.image(camera, &m))
+                } else if let Some(camera) = compressed_camera_name(topic) {
+                    decode::<CompressedImage>(data).map(|m| bridge.compressed_image(camera, &m))
                 } else {
                     Some(Ok(()))
                 };
@@ -116,6 +118,11 @@ pub fn camera_name(topic: &str) -> Option<&str> {
     (before.ends_with("/camera") || before == "camera").then_some(name)
 }
 
+/// `top` of `/camera/top/image_raw/compressed` (what the recorder keeps by default).
+pub fn compressed_camera_name(topic: &str) -> Option<&str> {
+    camera_name(topic.strip_suffix("/compressed")?)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -126,6 +133,11 @@ mod tests {
         assert_eq!(camera_name("/left/camera/wrist/image_raw"), Some("wrist"));
         assert_eq!(camera_name("/camera/top/image_raw/compressed"), None);
         assert_eq!(camera_name("/joint_states"), None);
+        assert_eq!(
+            compressed_camera_name("/camera/top/image_raw/compressed"),
+            Some("top")
+        );
+        assert_eq!(compressed_camera_name("/camera/top/image_raw"), None);
     }
 
     #[test]

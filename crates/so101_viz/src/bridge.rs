@@ -9,11 +9,27 @@ use rerun::RecordingStreamResult;
 use so101_core::command::targets_from_joint_state;
 use so101_core::robot::{JointPositions, JOINT_COUNT};
 use so101_msgs::geometry_msgs::PoseStamped;
-use so101_msgs::sensor_msgs::{Image, JointState};
+use so101_msgs::sensor_msgs::{CompressedImage, Image, JointState};
 
 use crate::rerun_log::SceneLog;
 
 /// The packed RGB pixels of an rgb8 or bgr8 image; why not otherwise.
+/// The media type of a CompressedImage's `format` ("jpeg", "png", or image_transport's
+/// "rgb8; jpeg compressed bgr8"); `None` for anything else (compressedDepth, unknown).
+pub fn media_type_of(format: &str) -> Option<&'static str> {
+    let format = format.to_ascii_lowercase();
+    if format.contains("compresseddepth") {
+        return None;
+    }
+    if format.contains("png") {
+        Some(rerun::components::MediaType::PNG)
+    } else if format.contains("jpeg") || format.contains("jpg") {
+        Some(rerun::components::MediaType::JPEG)
+    } else {
+        None
+    }
+}
+
 pub fn rgb_pixels(image: &Image) -> Result<Vec<u8>, String> {
     let (width, height, step) = (
         image.width as usize,
@@ -140,14 +156,45 @@ impl Bridge {
             .joint_command(&std::array::from_fn(|joint| targets.get(joint)))
     }
 
-    pub fn image(&mut self, camera: &str, message: &Image) -> RecordingStreamResult<()> {
-        let time = message.header.stamp.as_secs_f64();
+    /// Whether a frame of `camera` stamped `time` is due under the image rate (counts the skip).
+    fn image_due(&mut self, camera: &str, time: f64) -> bool {
         if let Some(last) = self.last_image.get(camera) {
             // A stamp going backwards is a restarted sim: log again from there.
             if time >= *last && time - last < self.image_period - 1e-9 {
                 self.counts.images_skipped += 1;
-                return Ok(());
+                return false;
             }
+        }
+        true
+    }
+
+    /// A sensor_msgs/CompressedImage (image_transport's /compressed), logged as the encoded
+    /// JPEG or PNG it is: Rerun decodes it, this process never does.
+    pub fn compressed_image(
+        &mut self,
+        camera: &str,
+        message: &CompressedImage,
+    ) -> RecordingStreamResult<()> {
+        let time = message.header.stamp.as_secs_f64();
+        if !self.image_due(camera, time) {
+            return Ok(());
+        }
+        let Some(media_type) = media_type_of(&message.format) else {
+            tracing::debug!(camera, format = %message.format, "compressed image not logged");
+            self.counts.rejected += 1;
+            return Ok(());
+        };
+        self.last_image.insert(camera.to_owned(), time);
+        self.at(time);
+        self.counts.images += 1;
+        self.log
+            .encoded_image(camera, message.data.clone(), media_type)
+    }
+
+    pub fn image(&mut self, camera: &str, message: &Image) -> RecordingStreamResult<()> {
+        let time = message.header.stamp.as_secs_f64();
+        if !self.image_due(camera, time) {
+            return Ok(());
         }
         let pixels = match rgb_pixels(message) {
             Ok(pixels) => pixels,
@@ -200,6 +247,18 @@ fn complete(known: &[Option<f64>; JOINT_COUNT]) -> Option<JointPositions> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn compressed_formats_map_to_media_types() {
+        assert_eq!(
+            media_type_of("rgb8; jpeg compressed bgr8"),
+            Some("image/jpeg")
+        );
+        assert_eq!(media_type_of("jpeg"), Some("image/jpeg"));
+        assert_eq!(media_type_of("PNG"), Some("image/png"));
+        assert_eq!(media_type_of("16UC1; compressedDepth png"), None);
+        assert_eq!(media_type_of("theora"), None);
+    }
 
     fn image(encoding: &str, width: u32, height: u32, step: u32, data: Vec<u8>) -> Image {
         Image {

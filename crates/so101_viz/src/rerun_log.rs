@@ -213,6 +213,19 @@ impl SceneLog {
         )
     }
 
+    /// A JPEG or PNG frame as it was encoded (`media_type`: image/jpeg, image/png).
+    pub fn encoded_image(
+        &self,
+        camera: &str,
+        bytes: Vec<u8>,
+        media_type: &'static str,
+    ) -> RecordingStreamResult<()> {
+        self.rec.log(
+            format!("cameras/{camera}"),
+            &rerun::EncodedImage::from_file_contents(bytes).with_media_type(media_type),
+        )
+    }
+
     pub fn cube(&self, pose: &Isometry3<f64>) -> RecordingStreamResult<()> {
         if let Some(half) = self.cube_half_extents.take() {
             self.rec.log_static(
