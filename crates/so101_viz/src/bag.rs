@@ -1,9 +1,17 @@
 //! Episode bags (recorder_node's rosbag2 MCAP directories) read back into a [`Bridge`].
 
 use so101_core::episode_bag;
-use std::path::{Path, PathBuf};
+use std::{
+    collections::HashMap,
+    io::Read,
+    path::{Path, PathBuf},
+};
 
 use byteorder::{BigEndian, LittleEndian};
+use mcap::{
+    records::Record,
+    sans_io::linear_reader::{LinearReadEvent, LinearReader},
+};
 use serde::de::DeserializeOwned;
 use so101_msgs::geometry_msgs::PoseStamped;
 use so101_msgs::sensor_msgs::{CompressedImage, Image, JointState};
@@ -59,56 +67,80 @@ fn decode<T: DeserializeOwned>(data: &[u8]) -> Option<T> {
     decoded.ok().map(|(value, _)| value)
 }
 
-/// Feeds every message of the episode at `episode` to `bridge`, in recording order.
+/// Feeds every message of the episode at `episode` to `bridge`, in recording order. Each file is
+/// read as a stream (mcap's sans-io reader, chunks decompressed one at a time), so memory does not
+/// grow with the episode.
 pub fn replay(episode: &Path, bridge: &mut Bridge) -> Result<BagReport, BagError> {
     let mut report = BagReport::default();
     for file in mcap_files(episode)? {
-        let bytes = std::fs::read(&file).map_err(|source| BagError::Read {
+        let read_error = |source: std::io::Error| BagError::Read {
             path: file.clone(),
             source,
-        })?;
-        for message in mcap::MessageStream::new(&bytes).map_err(|error| BagError::Read {
-            path: file.clone(),
-            source: std::io::Error::other(error.to_string()),
-        })? {
-            let message = match message {
-                Ok(message) => message,
+        };
+        let mut input = std::fs::File::open(&file).map_err(read_error)?;
+        let mut reader = LinearReader::new();
+        // Channel id -> topic, as the file declares them before their messages.
+        let mut topics: HashMap<u16, String> = HashMap::new();
+        while let Some(event) = reader.next_event() {
+            let record = match event {
+                Ok(LinearReadEvent::ReadRequest(wanted)) => {
+                    let read = input.read(reader.insert(wanted)).map_err(read_error)?;
+                    reader.notify_read(read);
+                    continue;
+                }
+                Ok(LinearReadEvent::Record { data, opcode }) => mcap::parse_record(opcode, data),
+                Err(error) => Err(error),
+            };
+            match record {
+                Ok(Record::Channel(channel)) => {
+                    topics.insert(channel.id, channel.topic);
+                }
+                Ok(Record::Message { header, data }) => {
+                    report.messages += 1;
+                    let topic = topics.get(&header.channel_id).map_or("", String::as_str);
+                    if !handle(bridge, topic, &data)? {
+                        report.undecodable += 1;
+                        tracing::debug!(topic, "undecodable message");
+                    }
+                }
+                Ok(_) => {}
                 Err(error) => {
+                    // A recording cut short ends in a truncated file: what came before is kept.
                     report.truncated = Some(format!("{}: {error}", file.display()));
                     break;
-                }
-            };
-            report.messages += 1;
-            let topic = message.channel.topic.as_str();
-            let data = message.data.as_ref();
-            let handled =
-                if topic.ends_with("/joint_states") && !topic.ends_with("leader/joint_states") {
-                    decode::<JointState>(data).map(|m| bridge.joint_state(&m))
-                } else if topic.ends_with("/joint_commands") {
-                    decode::<JointState>(data).map(|m| bridge.command(&m))
-                } else if topic.ends_with("/cube/pose") {
-                    decode::<PoseStamped>(data).map(|m| bridge.cube(&m))
-                } else if topic.ends_with("/task/reward") {
-                    decode::<Float64>(data).map(|m| bridge.reward(m.data))
-                } else if topic.ends_with("/task/success") {
-                    decode::<Bool>(data).map(|m| bridge.success(m.data))
-                } else if let Some(camera) = camera_name(topic) {
-                    decode::<Image>(data).map(|m| bridge.image(camera, &m))
-                } else if let Some(camera) = compressed_camera_name(topic) {
-                    decode::<CompressedImage>(data).map(|m| bridge.compressed_image(camera, &m))
-                } else {
-                    Some(Ok(()))
-                };
-            match handled {
-                Some(result) => result?,
-                None => {
-                    report.undecodable += 1;
-                    tracing::debug!(topic, "undecodable message");
                 }
             }
         }
     }
     Ok(report)
+}
+
+/// Hands one message to the bridge by its topic; false when it did not decode.
+fn handle(bridge: &mut Bridge, topic: &str, data: &[u8]) -> Result<bool, BagError> {
+    let handled = if topic.ends_with("/joint_states") && !topic.ends_with("leader/joint_states") {
+        decode::<JointState>(data).map(|m| bridge.joint_state(&m))
+    } else if topic.ends_with("/joint_commands") {
+        decode::<JointState>(data).map(|m| bridge.command(&m))
+    } else if topic.ends_with("/cube/pose") {
+        decode::<PoseStamped>(data).map(|m| bridge.cube(&m))
+    } else if topic.ends_with("/task/reward") {
+        decode::<Float64>(data).map(|m| bridge.reward(m.data))
+    } else if topic.ends_with("/task/success") {
+        decode::<Bool>(data).map(|m| bridge.success(m.data))
+    } else if let Some(camera) = camera_name(topic) {
+        decode::<Image>(data).map(|m| bridge.image(camera, &m))
+    } else if let Some(camera) = compressed_camera_name(topic) {
+        decode::<CompressedImage>(data).map(|m| bridge.compressed_image(camera, &m))
+    } else {
+        Some(Ok(()))
+    };
+    match handled {
+        Some(result) => {
+            result?;
+            Ok(true)
+        }
+        None => Ok(false),
+    }
 }
 
 /// `top` of `/camera/top/image_raw` (any namespace before it).
