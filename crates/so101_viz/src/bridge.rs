@@ -168,6 +168,13 @@ impl Bridge {
         true
     }
 
+    /// A frame of `camera` stamped `time` is being logged: the rate limit counts from it.
+    fn image_logged(&mut self, camera: &str, time: f64) {
+        self.last_image.insert(camera.to_owned(), time);
+        self.at(time);
+        self.counts.images += 1;
+    }
+
     /// A sensor_msgs/CompressedImage (image_transport's /compressed), logged as the encoded
     /// JPEG or PNG it is: Rerun decodes it, this process never does.
     pub fn compressed_image(
@@ -184,9 +191,7 @@ impl Bridge {
             self.counts.rejected += 1;
             return Ok(());
         };
-        self.last_image.insert(camera.to_owned(), time);
-        self.at(time);
-        self.counts.images += 1;
+        self.image_logged(camera, time);
         self.log
             .encoded_image(camera, message.data.clone(), media_type)
     }
@@ -204,9 +209,7 @@ impl Bridge {
                 return Ok(());
             }
         };
-        self.last_image.insert(camera.to_owned(), time);
-        self.at(time);
-        self.counts.images += 1;
+        self.image_logged(camera, time);
         self.log
             .image(camera, message.width, message.height, pixels)
     }

@@ -135,22 +135,13 @@ impl Capture {
 impl CameraRig {
     /// The pinhole model of each camera of `specs`; an error names a camera the scene lacks.
     pub fn intrinsics(sim: &Simulation, specs: &[CameraSpec]) -> Result<Vec<Intrinsics>> {
-        specs
-            .iter()
-            .map(|spec| {
-                let Some(model_id) = sim.id(ObjectKind::Camera, &spec.name) else {
-                    bail!(
-                        "the scene has no camera {:?} (--cameras; \"none\" renders nothing)",
-                        spec.name
-                    );
-                };
-                Ok(Intrinsics::from_fovy(
-                    sim.camera_fovy(model_id),
-                    spec.size.width,
-                    spec.size.height,
-                ))
+        Ok(model_ids(sim, specs)?
+            .into_iter()
+            .zip(specs)
+            .map(|(model_id, spec)| {
+                Intrinsics::from_fovy(sim.camera_fovy(model_id), spec.size.width, spec.size.height)
             })
-            .collect()
+            .collect())
     }
 
     /// Checks the cameras against the model, starts `consume` on a thread of its own with the
@@ -163,17 +154,17 @@ impl CameraRig {
         start_time: f64,
         consume: impl FnOnce(Receiver<FrameBatch>) + Send + 'static,
     ) -> Result<Self> {
-        Self::intrinsics(sim, &specs)?;
-        let mut cameras = Vec::with_capacity(specs.len());
-        for spec in specs {
-            let model_id = sim.id(ObjectKind::Camera, &spec.name).unwrap_or_default();
-            cameras.push(Camera {
+        let model_ids = model_ids(sim, &specs)?;
+        let cameras: Vec<Camera> = specs
+            .into_iter()
+            .zip(model_ids)
+            .map(|(spec, model_id)| Camera {
                 clock: FrameClock::new(spec.rate, start_time, sim.timestep()),
                 spec,
                 model_id,
                 skipped: 0,
-            });
-        }
+            })
+            .collect();
         // The renderer's offscreen buffer must hold the largest frame.
         let (mut width, mut height) = (1, 1);
         for camera in &cameras {
@@ -382,6 +373,20 @@ impl Drop for CameraRig {
             let _ = thread.join();
         }
     }
+}
+
+/// The model's id of each camera of `specs`; an error names a camera the scene lacks.
+fn model_ids(sim: &Simulation, specs: &[CameraSpec]) -> Result<Vec<usize>> {
+    specs
+        .iter()
+        .map(|spec| match sim.id(ObjectKind::Camera, &spec.name) {
+            Some(id) => Ok(id),
+            None => bail!(
+                "the scene has no camera {:?} (--cameras; \"none\" renders nothing)",
+                spec.name
+            ),
+        })
+        .collect()
 }
 
 struct RenderThread {
