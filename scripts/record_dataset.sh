@@ -56,9 +56,12 @@ cat <<SUMMARY
 Summary: $(grep -m1 'episode(s)' "${output}/convert.txt")
   dataset:  ${dataset} (repo id local/so101_cube_to_bin, LeRobot v3.0)
   bags:     ${output}/bags ($(du -sh "${output}/bags" | cut -f1))     logs: ${output}/logs
-Next: train a policy on it, then run it on the sim:
+Next: a policy trained on this CPU (docs/learning.md): 50 demonstrations without
+cameras, a state-based ACT with lerobot-train, evaluated through so101-run-policy:
   cd ${REPO_ROOT}
+  .venv/bin/so101-learn demos --episodes 50 --output runs/demos50
+  .venv/bin/so101-learn act --dataset runs/demos50/dataset --eval 100
+A vision policy on this dataset's cameras wants a GPU (about 28 s a training step here):
   .venv/bin/lerobot-train --dataset.repo_id=local/so101_cube_to_bin --dataset.root=${dataset} \\
       --policy.type=act --policy.push_to_hub=false --output_dir=outputs/act_so101
-  scripts/isolated .venv/bin/so101-run-policy outputs/act_so101/checkpoints/last/pretrained_model --eval 10
 SUMMARY

@@ -1,9 +1,10 @@
 #!/usr/bin/env bash
 # Create (or update) the project's Python environment .venv in the repository root:
 # rclpy (ROS 2 Jazzy PyPI wheels), the standard message packages, Fast DDS, LeRobot and the test tools,
-# all pinned in python/requirements.txt.
+# all pinned in python/requirements.txt; then python/requirements-nodeps.txt with --no-deps (imitation,
+# whose declared pins contradict LeRobot's: the file says why that is safe).
 #
-# Idempotent: a stamp in .venv holds the hash of the requirements file and the interpreter version,
+# Idempotent: a stamp in .venv holds the hashes of the requirements files and the interpreter version,
 # so a second run with unchanged requirements returns at once. A venv made by another Python
 # minor version is rebuilt from scratch.
 #
@@ -20,6 +21,7 @@ REPO_ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 . "${REPO_ROOT}/scripts/common.sh"
 help_if_asked "${BASH_SOURCE[0]}" "$@"
 REQUIREMENTS="${REPO_ROOT}/python/requirements.txt"
+NODEPS_REQUIREMENTS="${REPO_ROOT}/python/requirements-nodeps.txt"
 VENV="${VENV:-${REPO_ROOT}/.venv}"
 STAMP="${VENV}/.so101-requirements.stamp"
 
@@ -27,6 +29,7 @@ log() { printf 'setup_python: %s\n' "$*" >&2; }
 die() { printf 'setup_python: ERROR: %s\n' "$*" >&2; exit 1; }
 
 [ -f "${REQUIREMENTS}" ] || die "missing ${REQUIREMENTS}"
+[ -f "${NODEPS_REQUIREMENTS}" ] || die "missing ${NODEPS_REQUIREMENTS}"
 
 # Pick the interpreter: $PYTHON if given, else the first CPython 3.12 found (on PATH, then pyenv's
 # versions; Debian 12's own python3 is 3.11, which lerobot 0.6 does not support).
@@ -53,7 +56,7 @@ fi
 PTH_VERSION=2
 PACKAGE="${REPO_ROOT}/python/pyproject.toml"
 PLUGINS="$(cat "${REPO_ROOT}"/python/plugins/*/pyproject.toml | sha256sum | cut -d" " -f1)"
-WANT="requirements=$(sha256_of "${REQUIREMENTS}") package=$(sha256_of "${PACKAGE}") plugins=${PLUGINS} python=${PY_VERSION} pth=${PTH_VERSION}"
+WANT="requirements=$(sha256_of "${REQUIREMENTS}") nodeps=$(sha256_of "${NODEPS_REQUIREMENTS}") package=$(sha256_of "${PACKAGE}") plugins=${PLUGINS} python=${PY_VERSION} pth=${PTH_VERSION}"
 
 # Fast path: nothing changed since the last successful run.
 if [ -x "${VENV}/bin/python" ] && [ -f "${STAMP}" ] && [ "$(cat "${STAMP}")" = "${WANT}" ]; then
@@ -90,6 +93,9 @@ fi
 rm -f "${STAMP}"
 log "installing ${REQUIREMENTS#"${REPO_ROOT}"/}"
 "${VENV}/bin/python" -m pip install --quiet --disable-pip-version-check -r "${REQUIREMENTS}"
+# Without their declared dependencies (whatever they import is pinned in requirements.txt).
+log "installing ${NODEPS_REQUIREMENTS#"${REPO_ROOT}"/} (--no-deps)"
+"${VENV}/bin/python" -m pip install --quiet --disable-pip-version-check --no-deps -r "${NODEPS_REQUIREMENTS}"
 
 # The project's own Python package `so101` (python/: converter, policy runner, Gymnasium envs,
 # launcher, benchmarks), editable so the checkout is what runs; its dependencies are pinned above.
@@ -127,6 +133,8 @@ from geometry_msgs.msg import PoseStamped  # noqa: F401
 import pytest  # noqa: F401
 from lerobot.datasets.lerobot_dataset import LeRobotDataset  # noqa: F401
 import so101.convert  # noqa: F401
+import imitation.algorithms.bc  # noqa: F401  (installed --no-deps: its import chain must be complete)
+import stable_baselines3  # noqa: F401
 from so101.paths import repo_root
 assert repo_root().is_dir()
 rmw = get_rmw_implementation_identifier()

@@ -46,3 +46,13 @@ def network_namespace_problem() -> str | None:
     if not any(r[0] == "lo" and r[1] == "000000E0" and r[7] == "000000F0" for r in routes if len(r) >= 8):
         return "no multicast route on lo (ip route add 224.0.0.0/4 dev lo): DDS discovery would fail"
     return None
+
+
+def isolated_command(command: list[str]) -> list[str]:
+    """`command` as it must run to open DDS participants: as it is inside a private network
+    namespace, else behind scripts/isolated (which makes one for it)."""
+    if network_namespace_problem() is None:
+        return command
+    from .paths import isolated_wrapper
+
+    return [str(isolated_wrapper()), *command]

@@ -16,11 +16,9 @@ Run it inside scripts/isolated with the arm's node (evaluation starts its own si
 from __future__ import annotations
 
 import argparse
-import json
 import logging
 import sys
 import time
-from dataclasses import asdict, dataclass
 from pathlib import Path
 
 import numpy as np
@@ -29,7 +27,6 @@ from . import contract
 from .messages import cube_pose_vector, joint_positions, rgb_image
 from .policy import PolicyError, StackPolicy
 from .rclpy_wait import spin_until
-from .stats import wilson_interval
 from .units import JOINT_LIMITS, JOINT_NAMES
 
 DEFAULT_TASK = "put the cube in the bin"
@@ -164,26 +161,8 @@ def run_live(args, policy: StackPolicy) -> int:
 
 
 # =========================================================================== evaluation
-@dataclass
-class EpisodeResult:
-    seed: int
-    success: bool
-    sum_reward: float
-    max_reward: float
-    steps: int
-    video: str | None
-
-
-def tile(frames: dict[str, np.ndarray]) -> np.ndarray:
-    """Frames side by side (each padded at the bottom to the tallest), for one video."""
-    height = max(frame.shape[0] for frame in frames.values())
-    return np.concatenate([np.pad(f, ((0, height - f.shape[0]), (0, 0), (0, 0))) for f in frames.values()], axis=1)
-
-
 def evaluate(args, policy: StackPolicy) -> int:
-    from lerobot.utils.io_utils import write_video
-    from tqdm import tqdm
-
+    from .evaluation import run_episodes, summarize, write_report
     from .sim_env import make_env
 
     cameras = {camera.name: (camera.height, camera.width) for camera in policy.cameras}
@@ -191,78 +170,55 @@ def evaluate(args, policy: StackPolicy) -> int:
     # from the front.
     video_camera = args.video_camera or (None if cameras else "front")
     video_cameras = [video_camera] if video_camera else list(cameras)
+    filmed_cameras = dict(cameras)
     if video_camera and video_camera not in cameras:
-        cameras[video_camera] = (240, 320)
-    output = Path(args.output)
-    (output / "videos").mkdir(parents=True, exist_ok=True)
-    max_steps = int(round(args.episode_time * args.fps))
-    env = make_env(
-        args.sim_task,
-        backend=args.backend,
-        control_rate=args.fps,
-        lite=args.lite,
-        cameras=cameras or None,
-        dense_reward=args.reward == "dense",
-    )
-    results: list[EpisodeResult] = []
-    try:
-        for index in tqdm(range(args.eval), desc="episodes", unit="ep", disable=args.quiet):
-            seed = args.seed + index
-            observation, _ = env.reset(seed=seed)
-            policy.reset()
-            rewards: list[float] = []
-            video: list[np.ndarray] = []
-            success = False
-            for _ in range(max_steps):
-                pixels = observation.get("pixels", {})
-                if video_cameras:
-                    video.append(tile({name: pixels[name] for name in video_cameras}))
-                target = policy.act(policy.observation(observation["agent_pos"], pixels, observation["environment_state"]))
-                observation, reward, terminated, _, info = env.step(target)
-                rewards.append(reward)
-                if info["is_success"]:
-                    success = True
-                if terminated:
-                    break
-            path = None
-            if video:
-                path = output / "videos" / f"episode_{index:03d}_seed{seed}.mp4"
-                write_video(path, video, fps=int(round(args.fps)))
-            results.append(
-                EpisodeResult(
-                    seed, success, float(np.sum(rewards)), float(np.max(rewards)), len(rewards), str(path) if path else None
-                )
-            )
-    finally:
-        env.close()
+        filmed_cameras[video_camera] = (240, 320)
+    seeds = [args.seed + index for index in range(args.eval)]
+    filmed = len(seeds) if args.videos is None else min(args.videos, len(seeds))
+    # Episodes past --videos run on a sim without the extra video camera: rendering it would cost
+    # more than the rest of the step.
+    batches = [(0, seeds[:filmed], filmed_cameras, video_cameras), (filmed, seeds[filmed:], cameras, [])]
 
-    sums = [r.sum_reward for r in results]
-    summary = {
-        "policy": args.policy,
-        "episodes": len(results),
-        "pc_success": 100.0 * sum(r.success for r in results) / len(results),
-        "pc_success_ci95": [100.0 * bound for bound in wilson_interval(sum(r.success for r in results), len(results))],
-        "avg_sum_reward": float(np.mean(sums)),
-        "best_sum_reward": float(np.max(sums)),
-        "avg_max_reward": float(np.mean([r.max_reward for r in results])),
-        "reward": args.reward,
-        "backend": args.backend,
-        "fps": args.fps,
-        "episode_time_s": args.episode_time,
-    }
-    (output / "eval_info.json").write_text(
-        json.dumps({"aggregated": summary, "per_episode": [asdict(r) for r in results]}, indent=2)
-    )
-    for r in results:
-        print(
-            f"seed {r.seed:>4}: {'success' if r.success else 'failure'} after {r.steps} steps, "
-            f"reward sum {r.sum_reward:.2f} (max {r.max_reward:.2f})"
+    def act(observation: dict) -> np.ndarray:
+        pixels = observation.get("pixels", {})
+        return policy.act(policy.observation(observation["agent_pos"], pixels, observation["environment_state"]))
+
+    results = []
+    for first_index, batch_seeds, env_cameras, filmed_now in batches:
+        if not batch_seeds:
+            continue
+        env = make_env(
+            args.sim_task,
+            backend=args.backend,
+            control_rate=args.fps,
+            lite=args.lite,
+            cameras=env_cameras or None,
+            dense_reward=args.reward == "dense",
         )
-    print(
-        f"{len(results)} episode(s): success {summary['pc_success']:.0f} % "
-        f"(95 % interval {summary['pc_success_ci95'][0]:.0f}-{summary['pc_success_ci95'][1]:.0f} %), mean reward {summary['avg_sum_reward']:.2f}, "
-        f"best {summary['best_sum_reward']:.2f}; videos and eval_info.json in {output}"
+        try:
+            results += run_episodes(
+                env,
+                act,
+                lambda _observation: policy.reset(),
+                seeds=batch_seeds,
+                max_steps=int(round(args.episode_time * args.fps)),
+                video_cameras=filmed_now,
+                output=Path(args.output),
+                fps=args.fps,
+                quiet=args.quiet,
+                first_index=first_index,
+            )
+        finally:
+            env.close()
+    summary = summarize(
+        results,
+        policy=args.policy,
+        reward=args.reward,
+        backend=args.backend,
+        fps=args.fps,
+        episode_time_s=args.episode_time,
     )
+    write_report(Path(args.output), summary, results)
     return 0
 
 
@@ -321,6 +277,9 @@ def parser() -> argparse.ArgumentParser:
         default=None,
         help="film this camera (320x240) instead of the policy's cameras (default for a policy without cameras: front)",
     )
+    ev.add_argument(
+        "--videos", type=int, default=None, metavar="K", help="film only the first K episodes (default: every episode)"
+    )
     ev.add_argument("--output", default="eval", help="directory for eval_info.json and videos/")
     return p
 
@@ -333,6 +292,8 @@ def main(argv: list[str] | None = None) -> int:
             raise SystemExit(f"so101-run-policy: --camera {item!r}: expected NAME=TOPIC")
     if args.fps <= 0:
         raise SystemExit("so101-run-policy: --fps must be positive")
+    if args.videos is not None and args.videos < 0:
+        raise SystemExit("so101-run-policy: --videos must not be negative")
     if args.episode_time <= 0:
         raise SystemExit("so101-run-policy: --episode-time must be positive")
     try:

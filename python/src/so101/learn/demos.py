@@ -1,0 +1,108 @@
+"""Recipe `demos`: record N demonstrations of the scripted expert through the stack (so101-launch:
+sim node, teleop_node's expert, recorder_node, one bag per episode) and convert the bags into a
+LeRobot dataset (so101-bag-to-lerobot) with observation.environment_state, the cube's pose.
+
+Without cameras (the default: state-based policies need none) the sim runs 8x real time and
+50 episodes take about a minute to record and one to convert on 2 cores. The expert's noise
+(teleop_node --waypoint-noise / --action-noise) makes the demonstrations cover more than one
+path per cube placement; failed expert episodes stay out of the dataset unless --keep-failures.
+"""
+
+from __future__ import annotations
+
+import argparse
+import re
+import shlex
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+from ..paths import repo_root
+
+REPO_ID = "local/so101_demos"
+
+
+def add_parser(recipes, name: str) -> None:
+    p = recipes.add_parser(
+        name,
+        help="record N expert demonstrations through the stack and convert them into a LeRobot dataset",
+        description=__doc__,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    p.add_argument("--episodes", type=int, default=50, help="demonstrations to record")
+    p.add_argument("--seed", type=int, default=0, help="seed of the sim's cube placements and the expert's noise")
+    p.add_argument("--waypoint-noise", type=float, default=0.005, help="expert: noise on each waypoint's position (m)")
+    p.add_argument("--action-noise", type=float, default=0.01, help="expert: noise on every joint target (rad)")
+    p.add_argument(
+        "--cameras",
+        default="none",
+        help='cameras to record, the sim\'s --cameras notation ("none", "top:128x96", "top,front,wrist")',
+    )
+    p.add_argument("--speed", type=float, default=None, help="sim speed (default 8 without cameras, else 4)")
+    p.add_argument("--keep-failures", action="store_true", help="keep episodes the expert failed")
+    p.add_argument("--repo-id", default=REPO_ID, help="the dataset's repo id")
+    p.add_argument("--output", default=None, help="directory for bags/, dataset/ and logs/ (default runs/demos-<time>/)")
+    p.set_defaults(run=run)
+
+
+def launch_command(args, output: Path) -> list[str]:
+    """so101-launch with the expert and the recorder (it isolates DDS by itself)."""
+    speed = args.speed or (8.0 if args.cameras == "none" else 4.0)
+    teleop = f"--waypoint-noise {args.waypoint_noise} --action-noise {args.action_noise}"
+    return [
+        sys.executable,
+        "-m",
+        "so101.launch",
+        "--robot=sim",
+        "--control=expert",
+        f"--episodes={args.episodes}",
+        f"--seed={args.seed}",
+        "--record",
+        f"--bags={output / 'bags'}",
+        f"--log-dir={output / 'logs'}",
+        f"--speed={speed:g}",
+        f"--sim-args=--cameras {shlex.quote(args.cameras)}",
+        f"--teleop-args={teleop}",
+    ]
+
+
+def convert_command(args, output: Path) -> list[str]:
+    command = [sys.executable, "-m", "so101.convert", str(output / "bags"), "--output", str(output / "dataset")]
+    command += ["--repo-id", args.repo_id]
+    return command + ([] if args.keep_failures else ["--successful-only"])
+
+
+def run(args) -> int:
+    if args.episodes <= 0:
+        raise SystemExit("so101-learn demos: --episodes must be positive")
+    output = Path(args.output or repo_root() / "runs" / f"demos-{time.strftime('%Y%m%d-%H%M%S')}")
+    if (output / "dataset").exists():
+        raise SystemExit(f"so101-learn demos: {output / 'dataset'} exists already")
+    output.mkdir(parents=True, exist_ok=True)
+
+    started = time.monotonic()
+    print(f"==> recording {args.episodes} expert demonstration(s) into {output / 'bags'}", flush=True)
+    launched = subprocess.run(launch_command(args, output), stdout=subprocess.PIPE, text=True)
+    # The launcher prints one line per recorded episode: show them as they were, count successes.
+    recorded = [line for line in launched.stdout.splitlines() if "recorded episode_" in line]
+    print("\n".join(recorded))
+    if launched.returncode != 0:
+        print(launched.stdout[-4000:], file=sys.stderr)
+        raise SystemExit(f"so101-learn demos: so101-launch failed (exit {launched.returncode}); logs in {output / 'logs'}")
+    recorded_s = time.monotonic() - started
+
+    print(f"==> converting into {output / 'dataset'}", flush=True)
+    converted = subprocess.run(convert_command(args, output), stdout=subprocess.PIPE, text=True)
+    print(converted.stdout, end="")
+    if converted.returncode != 0:
+        raise SystemExit(f"so101-learn demos: so101-bag-to-lerobot failed (exit {converted.returncode})")
+    summary = re.search(r"^\d+ episode\(s\).*$", converted.stdout, re.MULTILINE)
+    successes = sum("(success)" in line for line in recorded)
+    print(
+        f"\nSummary: {len(recorded)} demonstration(s) recorded, {successes} successful, in {recorded_s:.0f} s; "
+        f"dataset: {summary.group(0) if summary else '?'}\n"
+        f"  dataset: {output / 'dataset'} (repo id {args.repo_id})\n"
+        f"Next: so101-learn act --dataset {output / 'dataset'}"
+    )
+    return 0

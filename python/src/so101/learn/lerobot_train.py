@@ -1,0 +1,177 @@
+"""Recipes `act` and `diffusion`: train LeRobot's ACT or Diffusion Policy on the state (joint
+positions and the cube's pose, observation.environment_state) with lerobot-train, in settings
+that fit a CPU in minutes, then evaluate the policy through so101-run-policy in lockstep with the
+sim node (the stack's real interface) over --eval seeded episodes.
+
+Why these settings (LeRobot's defaults are sized for images on a GPU: 28 s a step on 2 cores):
+- ACT: no VAE (the scripted expert's demonstrations have one mode per situation, the VAE's reason
+  to be is multimodal human data, and it doubles the cost of a step), a 256-wide transformer with
+  2 encoder layers and 1 decoder layer (4 encoder layers and 512 wide by default; with three input
+  tokens, width and depth buy nothing), chunks of 20 actions executed whole (0.67 s at 30 Hz:
+  long enough to carry the arm through a motion, short enough to react to where the cube is),
+  learning rate 1e-4 (1e-5 by default, which is tuned for a pretrained image backbone).
+- Diffusion: a U-Net of (64, 128, 256) channels instead of (512, 1024, 2048) (the state is 13
+  numbers, not image features), a horizon of 16 with 8 actions executed, DDIM with 10 inference
+  steps (DDPM's 100 steps make each chunk 10x slower to infer on a CPU).
+- Every input normalised by its dataset mean and std, the cube's pose too (its z of ~0.77 m and a
+  quaternion would otherwise dwarf the joints).
+--policy-arg passes anything else to lerobot-train (e.g. --policy-arg=--policy.dim_model=512).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+from ..isolation import isolated_command
+from ..paths import repo_root
+
+NORMALIZE_ALL = '{"VISUAL":"MEAN_STD","STATE":"MEAN_STD","ENV":"MEAN_STD","ACTION":"MEAN_STD"}'
+
+PRESETS: dict[str, dict] = {
+    "act": {
+        "policy": {
+            "use_vae": "false",
+            "dim_model": 256,
+            "dim_feedforward": 1024,
+            "n_encoder_layers": 2,
+            "n_decoder_layers": 1,
+            "chunk_size": 20,
+            "n_action_steps": 20,
+            "optimizer_lr": 1e-4,
+        },
+        # About 10 passes over 50 demonstrations: measured best (longer overfits: docs/benchmarks.md).
+        "steps": 2000,
+        "batch_size": 64,
+    },
+    "diffusion": {
+        "policy": {
+            "down_dims": "[64,128,256]",
+            "horizon": 16,
+            "n_action_steps": 8,
+            "n_obs_steps": 2,
+            "noise_scheduler_type": "DDIM",
+            "num_inference_steps": 10,
+        },
+        "steps": 2000,
+        "batch_size": 64,
+    },
+}
+
+
+def add_parser(recipes, name: str) -> None:
+    preset = PRESETS[name]
+    p = recipes.add_parser(
+        name,
+        help=f"train LeRobot's {'ACT' if name == 'act' else 'Diffusion Policy'} on the state with lerobot-train (CPU-sized), then evaluate it",
+        description=__doc__,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    p.add_argument("--dataset", required=True, help="a LeRobot dataset directory (so101-learn demos, so101-bag-to-lerobot)")
+    p.add_argument("--steps", type=int, default=preset["steps"], help="training steps")
+    p.add_argument("--batch-size", type=int, default=preset["batch_size"], help="batch size")
+    p.add_argument("--save-every", type=int, default=1000, help="checkpoint every this many steps")
+    p.add_argument("--device", default="cpu", help="torch device (cpu, cuda)")
+    p.add_argument("--seed", type=int, default=1000, help="training seed")
+    p.add_argument(
+        "--torch-threads",
+        type=int,
+        default=None,
+        help="torch's CPU threads for training and evaluation (OMP_NUM_THREADS; 1 keeps a shared machine responsive)",
+    )
+    p.add_argument("--policy-arg", action="append", default=[], help="one more lerobot-train argument (repeatable)")
+    p.add_argument("--output", default=None, help=f"lerobot-train's output directory (default outputs/{name}-<time>/)")
+    p.add_argument("--eval", type=int, default=20, metavar="M", help="then evaluate over M seeded episodes (0: no evaluation)")
+    p.add_argument("--eval-seed", type=int, default=1000, help="seed of the first evaluation episode (demos start at 0)")
+    p.add_argument(
+        "--eval-backend",
+        choices=["ros", "inprocess"],
+        default="ros",
+        help="ros: so101_sim_node in lockstep over DDS (the stack's interface); inprocess: the same core, faster",
+    )
+    p.add_argument("--eval-videos", type=int, default=10, metavar="K", help="an MP4 of each of the first K episodes")
+    p.add_argument("--quiet", action="store_true", help="no progress bars")
+    p.set_defaults(run=run, policy_type=name)
+
+
+def train_command(args, output: Path) -> list[str]:
+    """lerobot-train with the preset, every setting spelled out so the command reproduces the run."""
+    dataset = Path(args.dataset).resolve()
+    command = [
+        str(Path(sys.executable).with_name("lerobot-train")),
+        f"--dataset.repo_id=local/{dataset.name}",
+        f"--dataset.root={dataset}",
+        f"--policy.type={args.policy_type}",
+        f"--policy.device={args.device}",
+        "--policy.push_to_hub=false",
+        f"--policy.normalization_mapping={NORMALIZE_ALL}",
+    ]
+    command += [f"--policy.{key}={value}" for key, value in PRESETS[args.policy_type]["policy"].items()]
+    command += [
+        f"--steps={args.steps}",
+        f"--batch_size={args.batch_size}",
+        f"--save_freq={min(args.save_every, args.steps)}",
+        f"--log_freq={max(1, min(100, args.steps // 10))}",
+        f"--seed={args.seed}",
+        # One loader process beside the training: it overlaps reading the next batch with the step.
+        "--num_workers=1",
+        "--wandb.enable=false",
+        f"--output_dir={output}",
+    ]
+    return command + list(args.policy_arg)
+
+
+def eval_command(args, checkpoint: Path, eval_dir: Path) -> list[str]:
+    command = [sys.executable, "-m", "so101.run_policy", str(checkpoint), f"--eval={args.eval}", f"--seed={args.eval_seed}"]
+    command += [f"--backend={args.eval_backend}", f"--output={eval_dir}", "--lite", f"--device={args.device}"]
+    # MP4s of the first episodes only: filming costs more than the rest of an episode.
+    command += [f"--videos={min(args.eval, args.eval_videos)}"]
+    return isolated_command(command + (["--quiet"] if args.quiet else []))
+
+
+def run(args) -> int:
+    if args.steps <= 0 or args.batch_size <= 0:
+        raise SystemExit(f"so101-learn {args.policy_type}: --steps and --batch-size must be positive")
+    if not (Path(args.dataset) / "meta" / "info.json").is_file():
+        raise SystemExit(f"so101-learn {args.policy_type}: {args.dataset} is not a LeRobot dataset (no meta/info.json)")
+    output = Path(args.output or repo_root() / "outputs" / f"{args.policy_type}-{time.strftime('%Y%m%d-%H%M%S')}")
+    if output.exists():
+        raise SystemExit(f"so101-learn {args.policy_type}: {output} exists already (lerobot-train starts a new run there)")
+
+    environment = dict(os.environ)
+    if args.torch_threads:
+        environment["OMP_NUM_THREADS"] = str(args.torch_threads)
+    command = train_command(args, output)
+    print("==> " + " ".join(command), flush=True)
+    started = time.monotonic()
+    if subprocess.run(command, env=environment).returncode != 0:
+        raise SystemExit(f"so101-learn {args.policy_type}: lerobot-train failed")
+    train_s = time.monotonic() - started
+    checkpoint = output / "checkpoints" / "last" / "pretrained_model"
+
+    result = None
+    if args.eval > 0:
+        eval_dir = output / "eval"
+        command = eval_command(args, checkpoint, eval_dir)
+        print("==> " + " ".join(command), flush=True)
+        if subprocess.run(command, env=environment).returncode != 0:
+            raise SystemExit(f"so101-learn {args.policy_type}: so101-run-policy --eval failed")
+        result = json.loads((eval_dir / "eval_info.json").read_text())["aggregated"]
+
+    print(
+        f"\nSummary: {args.policy_type} trained {args.steps} steps (batch {args.batch_size}) in {train_s / 60:.1f} min on {args.device}"
+    )
+    print(f"  policy:  {checkpoint}")
+    if result:
+        low, high = result["pc_success_ci95"]
+        print(
+            f"  success: {result['pc_success']:.0f} % over {result['episodes']} episodes (95 % interval {low:.0f}-{high:.0f} %), "
+            f"mean reward {result['avg_sum_reward']:.2f}, best {result['best_sum_reward']:.2f}; videos in {output / 'eval'}"
+        )
+    print(f"Evaluate again: scripts/isolated .venv/bin/so101-run-policy {checkpoint} --eval 100 --seed {args.eval_seed}")
+    return 0

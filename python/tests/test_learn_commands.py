@@ -1,0 +1,63 @@
+"""The commands so101-learn's LeRobot recipes run (no process started): the demos recipe's launcher
+and converter calls, lerobot-train with each preset, and the evaluation through so101-run-policy."""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+import pytest
+
+from so101.learn import demos, lerobot_train
+
+
+def parse(module, name: str, *argv: str) -> argparse.Namespace:
+    p = argparse.ArgumentParser()
+    module.add_parser(p.add_subparsers(), name)
+    return p.parse_args([name, *argv])
+
+
+def test_demos_record_with_the_experts_noise_and_no_cameras_by_default(tmp_path):
+    args = parse(demos, "demos", "--episodes", "7", "--waypoint-noise", "0.002", "--action-noise", "0.03")
+    command = demos.launch_command(args, tmp_path)
+    assert "--control=expert" in command and "--record" in command and "--episodes=7" in command
+    assert "--teleop-args=--waypoint-noise 0.002 --action-noise 0.03" in command
+    assert "--sim-args=--cameras none" in command and "--speed=8" in command
+    assert f"--bags={tmp_path / 'bags'}" in command
+
+
+def test_demos_with_cameras_slow_down_so_every_frame_is_rendered(tmp_path):
+    args = parse(demos, "demos", "--cameras", "top:128x96")
+    command = demos.launch_command(args, tmp_path)
+    assert "--sim-args=--cameras top:128x96" in command and "--speed=4" in command
+
+
+def test_failed_demonstrations_stay_out_unless_kept(tmp_path):
+    assert "--successful-only" in demos.convert_command(parse(demos, "demos"), tmp_path)
+    assert "--successful-only" not in demos.convert_command(parse(demos, "demos", "--keep-failures"), tmp_path)
+
+
+@pytest.mark.parametrize("recipe", ["act", "diffusion"])
+def test_lerobot_train_gets_the_whole_preset_and_extra_arguments_last(recipe, tmp_path):
+    dataset = tmp_path / "my_demos"
+    args = parse(lerobot_train, recipe, "--dataset", str(dataset), "--steps", "50", "--policy-arg=--policy.foo=1")
+    command = lerobot_train.train_command(args, tmp_path / "out")
+    assert Path(command[0]).name == "lerobot-train"
+    assert f"--policy.type={recipe}" in command and "--policy.device=cpu" in command
+    for key, value in lerobot_train.PRESETS[recipe]["policy"].items():
+        assert f"--policy.{key}={value}" in command
+    assert "--steps=50" in command and f"--dataset.root={dataset.resolve()}" in command
+    assert "--save_freq=50" in command  # never beyond the last step, so `last` exists
+    assert any(arg.startswith("--policy.normalization_mapping=") and '"ENV":"MEAN_STD"' in arg for arg in command)
+    # draccus takes the last value of a repeated option: extra arguments override the preset.
+    assert command[-1] == "--policy.foo=1"
+
+
+def test_evaluation_goes_through_the_runner_on_unseen_seeds(tmp_path):
+    args = parse(lerobot_train, "act", "--dataset", str(tmp_path), "--eval", "100")
+    command = lerobot_train.eval_command(args, tmp_path / "model", tmp_path / "eval")
+    assert command[command.index("-m") + 1] == "so101.run_policy"
+    assert "--eval=100" in command and "--seed=1000" in command and "--backend=ros" in command
+    assert "--videos=10" in command
+    # Outside a network namespace (as here) the runner is put inside one.
+    assert Path(command[0]).name == "isolated"
