@@ -15,7 +15,7 @@ from so101.paths import repo_root
 
 @pytest.fixture
 def binaries(tmp_path, monkeypatch):
-    for name in ("so101_sim_node", "recorder_node", "teleop_node"):
+    for name in ("so101_sim_node", "recorder_node", "teleop_node", "so101_state_publisher"):
         (tmp_path / name).touch()
     monkeypatch.setenv("SO101_BIN_DIR", str(tmp_path))
 
@@ -58,3 +58,29 @@ def test_the_compressed_set_is_recorder_nodes_default_set_with_compressed_camera
     assert "camera/[^/]+/image_raw" in defaults
     swapped = [p + "/compressed" if p == "camera/[^/]+/image_raw" else p for p in defaults]
     assert launch.COMPRESSED_RECORDING == swapped
+
+
+def test_rviz_needs_rviz2_on_path_and_says_how_to_get_it(binaries, tmp_path, monkeypatch):
+    monkeypatch.setenv("PATH", str(tmp_path / "empty"))
+    args = launch.parser().parse_args(["--control", "none", "--rviz", "--log-dir", str(tmp_path / "logs")])
+    with pytest.raises(SystemExit, match="rviz2 on PATH.*ros-jazzy-rviz2"):
+        launch.plan(args)
+
+
+def test_rviz_opens_the_view_with_the_description_package_on_the_ament_path(binaries, tmp_path, monkeypatch):
+    bin_dir = tmp_path / "ros_bin"
+    bin_dir.mkdir()
+    (bin_dir / "rviz2").write_text("#!/bin/sh\n")
+    (bin_dir / "rviz2").chmod(0o755)
+    monkeypatch.setenv("PATH", str(bin_dir))
+    monkeypatch.setenv("AMENT_PREFIX_PATH", "/opt/ros/jazzy")
+    from so101 import description
+
+    monkeypatch.setattr(description, "install", lambda prefix, urdf=None: description.share_directory(prefix))
+    args = launch.parser().parse_args(["--control", "none", "--rviz", "--log-dir", str(tmp_path / "logs")])
+    specs = {spec.name: spec for spec in launch.plan(args)}
+    assert "so101_state_publisher" in specs  # --rviz implies --tf
+    rviz = specs["rviz2"]
+    prefix = tmp_path / "logs" / "ros_prefix"
+    assert rviz.argv == [str(bin_dir / "rviz2"), "-d", str(prefix / "share/so101_description/rviz/so101.rviz")]
+    assert rviz.env["AMENT_PREFIX_PATH"] == f"{prefix}:/opt/ros/jazzy"

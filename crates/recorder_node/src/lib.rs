@@ -10,5 +10,6 @@ pub mod episodes;
 pub mod gaps;
 pub mod metadata;
 pub mod node;
+pub mod parameters;
 pub mod raw;
 pub mod topics;

@@ -20,7 +20,9 @@ use rustdds::{
     no_key::SimpleDataReader,
     Timestamp,
 };
-use so101_core::ros::{qos, rate_limit::RateLimiter, shutdown::Shutdown, RosNode};
+use so101_core::ros::{
+    parameters::ParameterServer, qos, rate_limit::RateLimiter, shutdown::Shutdown, RosNode,
+};
 use so101_msgs::{
     std_msgs::{Bool, String as StringMessage},
     std_srvs::{SetBool, SetBoolRequest, Trigger, TriggerRequest, TriggerResponse},
@@ -33,6 +35,7 @@ use crate::{
     episodes::{parse_event, EpisodeEvent, StartOptions},
     gaps::GapTracker,
     metadata::QosSummary,
+    parameters::{self, SelectionOptions},
     raw::{RawAdapter, SerializedMessage},
     topics::{known_type, ros_topic_name, ros_type_name, Selection, DEFAULT_FIXED},
 };
@@ -73,13 +76,9 @@ pub fn run(args: Args) -> Result<()> {
     let shutdown = Shutdown::on_signals().context("cannot install the signal handlers")?;
     let mut node = RosNode::start("recorder_node", &args.node)?;
     let namespace = node.names().namespace().to_owned();
-    let selection = Selection::new(
-        &namespace,
-        &args.topics,
-        args.all,
-        &args.patterns,
-        args.exclude.as_deref(),
-    )?;
+    let mut selection_options = SelectionOptions::from_args(&args);
+    let selection = selection_options.selection(&namespace)?;
+    let parameters = ParameterServer::start(&mut node, parameters::declarations(&args))?;
     let bag = BagWriter::new(BagOptions {
         output: args.output.clone(),
         prefix: args.prefix.clone(),
@@ -126,6 +125,19 @@ pub fn run(args: Args) -> Result<()> {
         if Instant::now() >= next_discovery {
             next_discovery = Instant::now() + DISCOVERY_PERIOD;
             inputs.discover(&mut node, &sender);
+        }
+        let changes = parameters.changes();
+        if changes
+            .iter()
+            .any(|change| selection_options.apply(&change.name, &change.value))
+        {
+            match selection_options.selection(&namespace) {
+                Ok(selection) => {
+                    inputs.select(selection);
+                    next_discovery = Instant::now();
+                }
+                Err(error) => tracing::warn!(%error, "topic selection unchanged"),
+            }
         }
         control.take(&sender);
         inputs.receive(&sender, &budget);
@@ -229,6 +241,8 @@ struct Input {
     topic: usize,
     name: String,
     reader: SimpleDataReader<SerializedMessage, RawAdapter>,
+    /// Whether the selection still wants it (its samples are taken either way, written only then).
+    recording: bool,
     /// Log time of the last sample taken: RustDDS's receive instants can step back by
     /// microseconds when samples arrive reordered, and a topic's log times must not.
     last_log_ns: u64,
@@ -365,10 +379,24 @@ impl Inputs {
             topic: index,
             name: name.to_owned(),
             reader,
+            recording: true,
             last_log_ns: 0,
         });
         tracing::info!(topic = name, r#type = %info.full_name(), "recording topic");
         Ok(())
+    }
+
+    /// A new selection: subscribed topics it no longer wants stop being written (and start again
+    /// if wanted later); the next discovery subscribes the topics it newly wants.
+    fn select(&mut self, selection: Selection) {
+        for input in &mut self.inputs {
+            let recording = selection.wants(&input.name);
+            if recording != input.recording {
+                tracing::info!(topic = %input.name, recording, "topic selection changed");
+            }
+            input.recording = recording;
+        }
+        self.selection = selection;
     }
 
     /// Waits for data (at most RECEIVE_WAIT) and hands every sample to the writer.
@@ -396,6 +424,9 @@ impl Inputs {
                     change.writer_guid.to_bytes(),
                     i64::from(change.sequence_number),
                 );
+                if !input.recording {
+                    continue;
+                }
                 let log_ns = ns_from_timestamp(change.receive_instant).max(input.last_log_ns);
                 input.last_log_ns = log_ns;
                 let publish_ns = change.source_timestamp().map_or(log_ns, ns_from_timestamp);

@@ -66,6 +66,15 @@ impl GoalShaper {
         self.config.max_step
     }
 
+    /// New limits from the next goal on (a parameter set while the node runs).
+    pub fn set_config(&mut self, config: SafetyConfig) {
+        self.config = config;
+    }
+
+    pub fn config(&self) -> SafetyConfig {
+        self.config
+    }
+
     /// Makes the present position the target (after connecting, enabling torque, reconnecting);
     /// the servos' goals are being set to it, so it is also the previous goal.
     pub fn hold(&mut self, present: &JointPositions) {

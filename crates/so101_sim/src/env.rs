@@ -94,6 +94,11 @@ impl TaskEnv {
         self.settings
     }
 
+    /// Dense shaping of cube_to_bin's reward on or off, from the next reward on.
+    pub fn set_dense_reward(&mut self, dense: bool) {
+        self.settings.dense_reward = dense;
+    }
+
     /// A new episode: the cube at the next placement of the sequence (restarted from `seed` when
     /// given), the arm at home, settled for [`SETTLE_SECONDS`].
     pub fn reset(&mut self, seed: Option<u64>) -> CubeStart {

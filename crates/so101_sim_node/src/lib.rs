@@ -7,5 +7,6 @@
 pub mod cameras;
 pub mod cli;
 pub mod pacing;
+pub mod parameters;
 pub mod ros_io;
 pub mod run;

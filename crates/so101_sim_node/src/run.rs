@@ -7,7 +7,9 @@ use std::{
 };
 
 use anyhow::{Context, Result};
-use so101_core::ros::{command_inbox::CommandInbox, shutdown::Shutdown, RosNode};
+use so101_core::ros::{
+    command_inbox::CommandInbox, parameters::ParameterServer, shutdown::Shutdown, RosNode,
+};
 
 use so101_sim::{
     cameras::rig::{CameraRig, RigOptions},
@@ -20,6 +22,7 @@ use crate::{
     cameras::publish::{publish_batches, CameraTopics},
     cli::Args,
     pacing::{Pacer, TimeMode},
+    parameters::{self, Setting},
     ros_io::{Frame, FramePublisher, NodeDiagnostics, PendingCall, SimServices},
 };
 
@@ -69,6 +72,10 @@ pub fn run(args: Args) -> Result<()> {
     let inbox = CommandInbox::subscribe(&mut node)?;
     let services = SimServices::serve(&mut node)?;
     let cameras = start_cameras(&args, time_mode, &env, &mut node)?;
+    let parameters = ParameterServer::start(
+        &mut node,
+        parameters::declarations(&args, env.world().limits()),
+    )?;
     let pacer = Pacer::new(
         match time_mode {
             TimeMode::Scaled { speed } => Some(speed),
@@ -88,6 +95,7 @@ pub fn run(args: Args) -> Result<()> {
         publisher,
         inbox,
         services,
+        parameters,
         pacer,
         cameras,
         _node: node,
@@ -139,6 +147,7 @@ struct SimLoop {
     publisher: FramePublisher,
     inbox: CommandInbox,
     services: SimServices,
+    parameters: ParameterServer,
     pacer: Pacer,
     demo: Option<Script>,
     demo_start: f64,
@@ -175,6 +184,7 @@ impl SimLoop {
                 self.time_mode != TimeMode::Max || last_intake.elapsed() >= MAX_SPEED_INTAKE_PERIOD;
             if intake_due {
                 last_intake = Instant::now();
+                self.apply_parameters();
                 if !commands_step {
                     self.apply_commands();
                 }
@@ -239,6 +249,21 @@ impl SimLoop {
         let limits = *self.env.world().limits();
         for targets in commands {
             targets.apply_clamped(self.env.world_mut().targets_mut(), &limits);
+        }
+    }
+
+    /// Parameters set since the last look take effect now.
+    fn apply_parameters(&mut self) {
+        for change in self.parameters.changes() {
+            match parameters::setting(&change.name, &change.value) {
+                Some(Setting::DenseReward(dense)) => self.env.set_dense_reward(dense),
+                Some(Setting::CameraRate(rate)) => {
+                    if let Some(rig) = &mut self.cameras {
+                        rig.set_rate(rate);
+                    }
+                }
+                None => {}
+            }
         }
     }
 

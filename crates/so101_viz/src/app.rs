@@ -130,7 +130,15 @@ fn run_live(args: &LiveArgs, scene: &SceneArgs) -> Result<()> {
         .cloned()
         .collect();
     let mut bridge = Bridge::new(scene_log(rec, scene)?, scene.image_rate);
-    crate::live::run(&mut bridge, &args.node, &cameras, args.duration, &shutdown)?;
+    let parameters = crate::parameters::bridge(args, scene);
+    crate::live::run(
+        &mut bridge,
+        &args.node,
+        parameters,
+        &cameras,
+        args.duration,
+        &shutdown,
+    )?;
     bridge
         .log()
         .stream()

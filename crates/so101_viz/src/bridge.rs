@@ -101,18 +101,25 @@ pub struct Bridge {
 impl Bridge {
     /// `image_rate`: images logged per second of sim time and camera at most (0: all).
     pub fn new(log: SceneLog, image_rate: f64) -> Self {
-        Self {
+        let mut bridge = Self {
             log,
             now: None,
             positions: [None; JOINT_COUNT],
-            image_period: if image_rate > 0.0 {
-                1.0 / image_rate
-            } else {
-                0.0
-            },
+            image_period: 0.0,
             last_image: BTreeMap::new(),
             counts: Counts::default(),
-        }
+        };
+        bridge.set_image_rate(image_rate);
+        bridge
+    }
+
+    /// Images logged per second of sim time and camera at most from now on (0: all).
+    pub fn set_image_rate(&mut self, image_rate: f64) {
+        self.image_period = if image_rate > 0.0 {
+            1.0 / image_rate
+        } else {
+            0.0
+        };
     }
 
     pub fn log(&self) -> &SceneLog {

@@ -10,6 +10,7 @@ pub mod app;
 pub mod bag;
 pub mod bridge;
 pub mod live;
+pub mod parameters;
 pub mod rerun_log;
 pub mod scene_geometry;
 pub mod state_publisher;

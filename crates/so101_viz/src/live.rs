@@ -5,6 +5,7 @@ use std::time::{Duration, Instant};
 
 use anyhow::Result;
 use ros2_client::Subscription;
+use so101_core::ros::parameters::{ParameterServer, Parameters};
 use so101_core::ros::shutdown::Shutdown;
 use so101_core::ros::{qos, NodeArgs, RosNode};
 use so101_msgs::geometry_msgs::PoseStamped;
@@ -26,6 +27,7 @@ struct Topics {
 pub fn run(
     bridge: &mut Bridge,
     node_args: &NodeArgs,
+    parameters: Parameters,
     cameras: &[String],
     duration: Option<f64>,
     shutdown: &Shutdown,
@@ -47,10 +49,16 @@ pub fn run(
             })
             .collect::<Result<_>>()?,
     };
+    let parameters = ParameterServer::start(&mut node, parameters)?;
     tracing::info!(cameras = ?cameras, "bridge running");
     let started = Instant::now();
     while !shutdown.is_requested() && duration.is_none_or(|s| started.elapsed().as_secs_f64() < s) {
         let mut idle = true;
+        for change in parameters.changes() {
+            if let ("image_rate", Some(rate)) = (change.name.as_str(), change.value.as_f64()) {
+                bridge.set_image_rate(rate);
+            }
+        }
         // Joint states first: they carry the sim time the unstamped topics are logged at.
         while let Ok(Some((message, _))) = topics.joint_states.take() {
             bridge.joint_state(&message)?;

@@ -10,6 +10,7 @@ use clap::Parser;
 use nalgebra::Isometry3;
 use so101_core::command::targets_from_joint_state;
 use so101_core::robot::{DEFAULT_SCENE, JOINT_LIMITS, JOINT_NAMES};
+use so101_core::ros::parameters::ParameterServer;
 use so101_core::ros::rate_limit::RateLimiter;
 use so101_core::ros::shutdown::Shutdown;
 use so101_core::ros::{qos, NodeArgs, RosNode};
@@ -19,7 +20,7 @@ use so101_msgs::tf2_msgs::TFMessage;
 
 use crate::scene_geometry::SceneGeometry;
 use crate::tf::{joint_transforms, static_transforms, Frames};
-use crate::urdf::robot_description;
+use crate::urdf::{robot_description, MeshUri};
 
 /// Publishes the SO-101's robot description (URDF) and its tf tree from /joint_states, so RViz and
 /// other ROS tools show the arm (sim or real).
@@ -32,6 +33,11 @@ pub struct Args {
     /// Draw the links with boxes even where the scene's meshes are installed.
     #[arg(long)]
     pub no_meshes: bool,
+    /// How the URDF names the mesh files: package:// (resolves wherever the so101_description
+    /// package is installed: `so101-description install`) or file:// (absolute paths, this machine
+    /// only).
+    #[arg(long, value_enum, default_value = "package")]
+    pub mesh_uri: MeshUri,
     /// Parent frame of the arm's base.
     #[arg(long, default_value = "world")]
     pub world_frame: String,
@@ -54,13 +60,17 @@ pub struct Args {
 pub fn run(args: Args) -> Result<()> {
     let geometry = SceneGeometry::from_scene_file(&args.scene)?;
     let meshes = !args.no_meshes && geometry.has_meshes();
-    let urdf = robot_description(&geometry, meshes);
+    let urdf = robot_description(&geometry, meshes.then_some(args.mesh_uri));
     if args.print_urdf {
         print!("{urdf}");
         return Ok(());
     }
     let shutdown = Shutdown::on_signals().context("cannot install the signal handlers")?;
     let mut node = RosNode::start("so101_state_publisher", &args.node)?;
+    let _parameters = ParameterServer::start(
+        &mut node,
+        crate::parameters::state_publisher(&args, meshes, &urdf),
+    )?;
     let description = node.publisher::<RosString>("robot_description", qos::latched())?;
     // Under a namespace the tree goes to /NS/tf, as in multi-robot ROS 2 set-ups (tf remapped).
     let tf = node.publisher::<TFMessage>("tf", qos::reliable(100))?;

@@ -13,24 +13,45 @@ use crate::scene_geometry::{BoxShape, SceneGeometry};
 /// The frame of the grasp point (a fixed child of the gripper), for tools that want the tool tip.
 pub const GRASP_LINK: &str = "grasp_point";
 
-/// The URDF text. With `meshes` the links are drawn with the scene's mesh files (absolute file://
-/// URIs, so it only suits tools on this machine); the boxes are always the collision shapes.
-pub fn robot_description(geometry: &SceneGeometry, meshes: bool) -> String {
+/// The ROS package whose share directory holds the meshes (`so101-description install` makes it).
+pub const DESCRIPTION_PACKAGE: &str = "so101_description";
+
+/// How the URDF names its mesh files.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum MeshUri {
+    /// `package://so101_description/meshes/FILE`: resolves on any machine where the package is
+    /// installed (RViz and MoveIt look it up in AMENT_PREFIX_PATH).
+    Package,
+    /// `file:///absolute/path`: only on this machine, no package needed.
+    File,
+}
+
+/// The URI of `file` in the URDF.
+pub fn mesh_uri(file: &std::path::Path, kind: MeshUri) -> String {
+    match kind {
+        MeshUri::Package => format!(
+            "package://{DESCRIPTION_PACKAGE}/meshes/{}",
+            file.file_name().unwrap_or_default().to_string_lossy()
+        ),
+        MeshUri::File => format!(
+            "file://{}",
+            file.canonicalize().unwrap_or(file.to_path_buf()).display()
+        ),
+    }
+}
+
+/// The URDF text. With `meshes` the links are drawn with the scene's mesh files, named as `uris`
+/// says; the boxes are always the collision shapes.
+pub fn robot_description(geometry: &SceneGeometry, meshes: Option<MeshUri>) -> String {
     let mut out = String::from("<?xml version=\"1.0\"?>\n<robot name=\"so101\">\n");
     out.push_str("  <material name=\"printed\"><color rgba=\"0.93 0.93 0.9 1\"/></material>\n");
     out.push_str("  <material name=\"box\"><color rgba=\"0.95 0.55 0.15 1\"/></material>\n");
     for name in std::iter::once(BASE_LINK).chain(LINK_NAMES) {
         let _ = writeln!(out, "  <link name=\"{name}\">");
         if let Some(link) = geometry.links.get(name) {
-            if meshes && !link.meshes.is_empty() {
+            if let Some(kind) = meshes.filter(|_| !link.meshes.is_empty()) {
                 for mesh in &link.meshes {
-                    let uri = format!(
-                        "file://{}",
-                        mesh.file
-                            .canonicalize()
-                            .unwrap_or(mesh.file.clone())
-                            .display()
-                    );
+                    let uri = mesh_uri(&mesh.file, kind);
                     let _ = writeln!(
                         out,
                         "    <visual>{}<geometry><mesh filename=\"{}\"/></geometry><material name=\"printed\"/></visual>",
@@ -106,7 +127,7 @@ mod tests {
     use super::*;
     use crate::scene_geometry::SceneGeometry;
 
-    fn description(meshes: bool) -> String {
+    fn description(meshes: Option<MeshUri>) -> String {
         let geometry =
             SceneGeometry::from_scene_file(std::path::Path::new(so101_core::robot::DEFAULT_SCENE))
                 .expect("the project's scene parses");
@@ -131,7 +152,7 @@ mod tests {
 
     #[test]
     fn the_joints_reproduce_the_kinematic_model() {
-        let text = description(false);
+        let text = description(None);
         let document = roxmltree::Document::parse(&text).expect("valid XML");
         let joints: Vec<_> = document
             .descendants()
@@ -174,8 +195,21 @@ mod tests {
 
     #[test]
     fn without_meshes_the_links_are_drawn_with_their_boxes() {
-        let text = description(false);
+        let text = description(None);
         assert!(!text.contains("<mesh"));
         assert!(text.matches("<visual>").count() >= 7);
+    }
+
+    #[test]
+    fn mesh_uris_are_package_relative_or_absolute_files() {
+        let file = std::path::Path::new("/somewhere/meshes/base_so101_v2.stl");
+        assert_eq!(
+            mesh_uri(file, MeshUri::Package),
+            "package://so101_description/meshes/base_so101_v2.stl"
+        );
+        assert_eq!(
+            mesh_uri(file, MeshUri::File),
+            "file:///somewhere/meshes/base_so101_v2.stl"
+        );
     }
 }

@@ -10,3 +10,4 @@ pub mod controls;
 pub mod input;
 pub mod motion;
 pub mod node;
+pub mod parameters;

@@ -11,7 +11,10 @@ use ros2_client::{Client, Publisher, Subscription};
 use so101_core::{
     command::targets_from_joint_state,
     robot::{JointPositions, JOINT_LIMITS, JOINT_NAMES},
-    ros::{clock::SimClock, qos, rate_limit::RateLimiter, shutdown::Shutdown, RosNode},
+    ros::{
+        clock::SimClock, parameters::ParameterServer, qos, rate_limit::RateLimiter,
+        shutdown::Shutdown, RosNode,
+    },
 };
 use so101_core::{expert::ExpertConfig, robot::follow};
 use so101_msgs::{
@@ -29,6 +32,7 @@ use crate::{
         Request, Scene, Source, Tick,
     },
     motion::{jog_cartesian, jog_joints, Mode, Speeds},
+    parameters::{self, Tunables},
 };
 
 /// How long to wait for /sim/reset to answer before asking again (a request sent before the
@@ -245,12 +249,8 @@ pub fn run(args: Args) -> Result<()> {
         Clock::Wall(Instant::now())
     };
     let mut source = open_source(&args, &mut node)?;
-    let speeds = Speeds {
-        joint: args.joint_speed,
-        linear: args.linear_speed,
-        angular: args.angular_speed,
-        gripper: args.gripper_speed,
-    };
+    let parameters = ParameterServer::start(&mut node, parameters::declarations(&args))?;
+    let mut tunables = Tunables::from_args(&args);
     let period = 1.0 / args.rate;
     let started = Instant::now();
     let mut mode = args.mode;
@@ -292,6 +292,9 @@ pub fn run(args: Args) -> Result<()> {
             due + period
         });
 
+        for change in parameters.changes() {
+            tunables.apply(&change.name, &change.value);
+        }
         topics.take(&mut measured, &mut scene);
         if started.elapsed() < DISCOVERY_GRACE {
             continue;
@@ -314,9 +317,9 @@ pub fn run(args: Args) -> Result<()> {
                     &current,
                     &reading.request,
                     mode,
-                    &speeds,
+                    &tunables.speeds,
                     period,
-                    args.max_step,
+                    tunables.max_step,
                     &mut warnings,
                 );
                 targets = Some(next);

@@ -13,6 +13,10 @@
             robot time for the three 640x480 cameras at 30 Hz instead of 83, at 52 dB PSNR);
             --raw-images records the raw sensor_msgs/Image frames instead
   --tf:     so101_state_publisher (/robot_description and /tf, for RViz)
+  --rviz:   RViz 2 (rviz2, from a ROS 2 Jazzy install on PATH) with the stack's view
+            (assets/rviz/so101.rviz: the arm, its frames, the three cameras); implies --tf and
+            installs the so101_description package (meshes for package:// URIs) into
+            LOG_DIR/ros_prefix, which RViz finds through AMENT_PREFIX_PATH
   --rerun:  so101_rerun live into a viewer it starts (spawn), a running one (connect[=URL]) or a
             FILE.rrd
 
@@ -91,6 +95,7 @@ class NodeSpec:
     terminal: bool = False  # keeps the launcher's terminal (keyboard teleop)
     ends_run: bool = False  # its own exit ends the run
     open_stdin: bool = False  # reads commands from stdin and ends at its EOF (the emulator)
+    env: dict[str, str] | None = None  # its whole environment (default: node_environment())
 
 
 @dataclass
@@ -154,12 +159,14 @@ def plan(args) -> list[NodeSpec]:
                 leader += ["--robot-id", args.leader_id]
             specs.append(NodeSpec("leader_arm", leader, ready="publisher /leader/joint_states"))
 
-    if args.tf:
+    if args.tf or args.rviz:
         specs.append(
             NodeSpec(
                 "so101_state_publisher", [str(node_binary("so101_state_publisher")), *ns], ready="publisher /robot_description"
             )
         )
+    if args.rviz:
+        specs.append(rviz_spec(Path(args.log_dir) / "ros_prefix"))
     if args.rerun:
         sink = args.rerun
         if sink == "spawn":
@@ -205,6 +212,24 @@ def plan(args) -> list[NodeSpec]:
         runner += shlex.split(args.policy_args)
         specs.append(NodeSpec("so101-run-policy", runner, ends_run=True))
     return specs
+
+
+def rviz_spec(prefix: Path) -> NodeSpec:
+    """rviz2 with the stack's view, the so101_description package installed into `prefix` for its
+    package:// mesh URIs. rviz2 comes from the user's ROS 2 install, with its environment."""
+    from .description import RVIZ_CONFIG, install
+
+    rviz = shutil.which("rviz2")
+    if rviz is None:
+        raise SystemExit(
+            "so101-launch: --rviz needs rviz2 on PATH (ROS 2 Jazzy: apt install ros-jazzy-rviz2, then "
+            "source /opt/ros/jazzy/setup.bash); without it, `so101-description install DIR` gives the "
+            "package and view to open elsewhere"
+        )
+    share = install(prefix)
+    env = dict(os.environ)
+    env["AMENT_PREFIX_PATH"] = os.pathsep.join([str(prefix), *filter(None, [env.get("AMENT_PREFIX_PATH")])])
+    return NodeSpec("rviz2", [rviz, "-d", str(share / RVIZ_CONFIG)], env=env)
 
 
 def lerobot_calibration_file(robot_id: str) -> Path:
@@ -283,7 +308,7 @@ class Launch:
             stdin = None if spec.terminal else subprocess.PIPE if spec.open_stdin else subprocess.DEVNULL
             process = processes.start(
                 [*DIE_WITH_PARENT, *spec.argv],
-                env=node_environment(),
+                env=spec.env if spec.env is not None else node_environment(),
                 stdin=stdin,
                 stdout=None if spec.terminal else out,
                 stderr=out,
@@ -411,6 +436,7 @@ def parser() -> argparse.ArgumentParser:
     control.add_argument("--policy-args", default="", help='more so101-run-policy flags, e.g. "--duration 60"')
     viz = p.add_argument_group("visualization")
     viz.add_argument("--tf", action="store_true", help="publish /robot_description and /tf (so101_state_publisher)")
+    viz.add_argument("--rviz", action="store_true", help="open RViz 2 with the stack's view (needs rviz2 on PATH; implies --tf)")
     viz.add_argument(
         "--rerun",
         default=None,

@@ -6,6 +6,7 @@ pub mod context;
 pub mod logging;
 pub mod names;
 pub mod node;
+pub mod parameters;
 pub mod qos;
 pub mod rate_limit;
 pub mod shutdown;

@@ -3,9 +3,9 @@
 //!
 //! No ros2-client Spinner runs: it always subscribes /clock as builtin_interfaces/Time, which puts a
 //! second, wrong type on /clock in every peer's graph (rclpy then lists /clock with two types) and
-//! never matches a standard rosgraph_msgs/Clock publisher anyway. The nodes here need none of what
-//! it serves (parameter services, graph events); node discovery comes from the context's
-//! ros_discovery_info, and sim time from [`super::clock::SimClock`].
+//! never matches a standard rosgraph_msgs/Clock publisher anyway. The parameter services come from
+//! [`super::parameters`], node discovery from the context's ros_discovery_info, and sim time from
+//! [`super::clock::SimClock`].
 
 use ros2_client::{
     Context, Node, NodeOptions, Publisher, QosProfile, Server, ServiceMapping, Subscription,
@@ -41,6 +41,7 @@ pub enum NodeError {
 /// A started node. Dropping it leaves the graph.
 pub struct RosNode {
     node: Node,
+    base_name: String,
     names: Names,
     // Kept so the participant outlives the node.
     context: Context,
@@ -72,9 +73,20 @@ impl RosNode {
         );
         Ok(Self {
             node,
+            base_name: base_name.to_owned(),
             names,
             context,
         })
+    }
+
+    /// The node's name without its namespace (e.g. `so101_sim_node`).
+    pub fn base_name(&self) -> &str {
+        &self.base_name
+    }
+
+    /// The node's name with its namespace (e.g. `/left/so101_sim_node`), as the graph shows it.
+    pub fn fully_qualified_name(&self) -> String {
+        self.names.resolve(&self.base_name)
     }
 
     pub fn names(&self) -> &Names {
@@ -101,6 +113,29 @@ impl RosNode {
             .create_publisher(&topic, Some(qos))
             .map_err(|error| NodeError::Create {
                 what: format!("publisher {relative}"),
+                reason: format!("{error:?}"),
+            })
+    }
+
+    /// A publisher of `T` on the absolute name `absolute`, outside the node's namespace (rcl's
+    /// graph-wide topics such as /parameter_events).
+    pub fn global_publisher<T: RosMessage>(
+        &mut self,
+        absolute: &str,
+        qos: QosProfile,
+    ) -> Result<Publisher<T>, NodeError> {
+        let name = Names::new(None)?.name(absolute)?;
+        let topic = self
+            .node
+            .create_topic(&name, T::INFO.message_type_name(), &qos)
+            .map_err(|error| NodeError::Create {
+                what: format!("topic {absolute}"),
+                reason: format!("{error:?}"),
+            })?;
+        self.node
+            .create_publisher(&topic, Some(qos))
+            .map_err(|error| NodeError::Create {
+                what: format!("publisher {absolute}"),
                 reason: format!("{error:?}"),
             })
     }

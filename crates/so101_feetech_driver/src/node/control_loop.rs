@@ -6,7 +6,8 @@ use std::time::{Duration, Instant};
 
 use anyhow::{Context, Result};
 use so101_core::ros::{
-    command_inbox::CommandInbox, rate_limit::RateLimiter, shutdown::Shutdown, RosNode,
+    command_inbox::CommandInbox, parameters::ParameterServer, rate_limit::RateLimiter,
+    shutdown::Shutdown, RosNode,
 };
 use so101_msgs::{
     builtin_interfaces::Time, diagnostic_msgs::DiagnosticArray, sensor_msgs::JointState,
@@ -17,7 +18,7 @@ use super::{
     controller::{Controller, ControllerConfig, CycleOutput},
     cycle_stats::{CycleStats, CycleSummary, Schedule},
     diagnostics::{self, DriverReport},
-    emergency,
+    emergency, parameters,
     ros_io::{Output, Outputs, TorqueService},
 };
 use crate::{
@@ -106,6 +107,10 @@ pub fn run(args: RunArgs) -> Result<()> {
         Some(CommandInbox::subscribe(&mut node)?)
     };
     let torque_service = TorqueService::serve(&mut node)?;
+    let parameters = ParameterServer::start(
+        &mut node,
+        parameters::declarations(&args, controller.limits()),
+    )?;
     let started_cpu = cpu_time();
     let mut driver = Driver {
         controller,
@@ -113,6 +118,7 @@ pub fn run(args: RunArgs) -> Result<()> {
         outputs,
         inbox,
         torque_service,
+        parameters,
         stats: CycleStats::new(Instant::now()),
         next_diagnostics: Instant::now() + DIAGNOSTICS_PERIOD,
         warnings: RateLimiter::new(Duration::from_secs(2)),
@@ -133,6 +139,7 @@ struct Driver {
     outputs: Outputs,
     inbox: Option<CommandInbox>,
     torque_service: TorqueService,
+    parameters: ParameterServer,
     stats: CycleStats,
     next_diagnostics: Instant,
     warnings: RateLimiter,
@@ -178,6 +185,7 @@ impl Driver {
     }
 
     fn cycle(&mut self, now: Instant) {
+        self.apply_parameters();
         self.take_commands(now);
         self.serve_torque_requests();
         let output = self.controller.cycle(now);
@@ -191,6 +199,17 @@ impl Driver {
         if now >= self.next_diagnostics {
             self.next_diagnostics = now + DIAGNOSTICS_PERIOD;
             self.publish_diagnostics();
+        }
+    }
+
+    /// Safety limits set since the last cycle take effect now.
+    fn apply_parameters(&mut self) {
+        for change in self.parameters.changes() {
+            let safety = self.controller.safety();
+            if let Some(safety) = parameters::safety_with(safety, &change.name, &change.value) {
+                tracing::info!(?safety, "safety limits changed");
+                self.controller.set_safety(safety);
+            }
         }
     }
 

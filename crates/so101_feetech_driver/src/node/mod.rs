@@ -5,6 +5,7 @@ pub mod controller;
 pub mod cycle_stats;
 pub mod diagnostics;
 pub mod emergency;
+pub mod parameters;
 mod ros_io;
 
 pub use control_loop::run;

@@ -252,6 +252,14 @@ impl CameraRig {
         })
     }
 
+    /// Every camera renders at `rate` frames per second of sim time from now on.
+    pub fn set_rate(&mut self, rate: f64) {
+        for camera in &mut self.cameras {
+            camera.spec.rate = rate;
+            camera.clock.set_rate(rate);
+        }
+    }
+
     /// Every camera takes a frame at the next capture (a new episode).
     pub fn restart(&mut self, time: f64) {
         for camera in &mut self.cameras {

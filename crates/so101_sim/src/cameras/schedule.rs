@@ -36,6 +36,12 @@ impl FrameClock {
         true
     }
 
+    /// Frames from now on come at `rate` per second of sim time (the next one stays where it was
+    /// scheduled).
+    pub fn set_rate(&mut self, rate: f64) {
+        self.period = 1.0 / rate;
+    }
+
     /// The next frame is due at `time` (a new episode starts with a frame of every camera).
     pub fn restart(&mut self, time: f64) {
         self.next_due = time;

@@ -18,7 +18,7 @@ impl fmt::Display for FrameSize {
 /// Largest frame side accepted (MuJoCo's offscreen buffer is one GL renderbuffer).
 const MAX_SIDE: u32 = 4096;
 /// Highest camera rate accepted, frames per second of sim time.
-const MAX_RATE: f64 = 1000.0;
+pub const MAX_RATE: f64 = 1000.0;
 
 /// One entry of `--cameras`: a model camera by name, with the size and rate it overrides.
 #[derive(Debug, Clone, PartialEq)]

@@ -235,6 +235,21 @@ impl<C: Connector> Controller<C> {
         }
     }
 
+    /// The calibrated range of each joint (rad), where targets are clamped.
+    pub fn limits(&self) -> &[JointLimit; JOINT_COUNT] {
+        &self.limits
+    }
+
+    pub fn safety(&self) -> SafetyConfig {
+        self.shaper.config()
+    }
+
+    /// New safety limits from the next cycle on.
+    pub fn set_safety(&mut self, safety: SafetyConfig) {
+        self.config.safety = safety;
+        self.shaper.set_config(safety);
+    }
+
     /// One control cycle at `now`.
     pub fn cycle(&mut self, now: Instant) -> CycleOutput {
         if matches!(self.link, Link::Down { .. }) {

@@ -1,0 +1,179 @@
+//! The driver node's ROS parameters: its command-line settings, read-only, and the safety limits
+//! that take effect while it runs (max_step, command_timeout). Names are the options' names with '_'.
+
+use std::time::Duration;
+
+use so101_core::{
+    robot::{JointLimit, JOINT_COUNT},
+    ros::parameters::{joint_declarations, Declaration, Parameters, Value},
+};
+
+use crate::{
+    cli::{CycleRate, RunArgs, MAX_STEP_CEILING},
+    safety::SafetyConfig,
+};
+
+/// The node's parameters for `args`, with the calibrated joint limits.
+pub fn declarations(args: &RunArgs, limits: &[JointLimit; JOINT_COUNT]) -> Parameters {
+    let text = |value: &dyn std::fmt::Display| Value::String(value.to_string());
+    let rate = match args.rate {
+        CycleRate::Hz(hz) => hz.to_string(),
+        CycleRate::Max => "max".to_owned(),
+    };
+    let mut declarations =
+        vec![
+        Declaration::new("port", text(&args.port.port.display()), "Serial port of the servo bus."),
+        Declaration::new("baud", Value::Integer(i64::from(args.port.baud)), "Bus baud rate."),
+        Declaration::new(
+            "retries",
+            Value::Integer(i64::from(args.port.retries)),
+            "Extra attempts after a transaction got no valid answer.",
+        ),
+        Declaration::new(
+            "bus_slack_ms",
+            Value::Double(args.port.bus_slack_ms),
+            "Milliseconds allowed on top of a transaction's wire time.",
+        ),
+        Declaration::new(
+            "robot_id",
+            Value::String(args.calibration.robot_id.clone()),
+            "Robot id naming the LeRobot calibration file.",
+        ),
+        Declaration::new(
+            "calibration",
+            text(&args.calibration.path().display()),
+            "Calibration file in use.",
+        ),
+        Declaration::new(
+            "leader",
+            Value::Bool(args.calibration.leader),
+            "A leader arm: torque off, /leader/joint_states.",
+        ),
+        Declaration::new(
+            "rate",
+            Value::String(rate),
+            "Control cycles per second, or \"max\".",
+        ),
+        Declaration::new(
+            "telemetry_rate",
+            Value::Double(args.telemetry_rate),
+            "Reads per second of velocity, load, voltage, temperature and current.",
+        ),
+        Declaration::new(
+            "max_step",
+            Value::Double(args.max_step),
+            "Largest distance (rad) a goal may be from the joint's present position and from the \
+             previous goal; bigger moves are approached over several cycles. Takes effect at the \
+             next cycle.",
+        )
+        .dynamic()
+        .float_range(0.0, MAX_STEP_CEILING)
+        .check("above 0", |value| match value.as_f64() {
+            Some(step) if step > 0.0 => Ok(()),
+            _ => Err("a step of 0 would never move the arm; above 0, please".to_owned()),
+        }),
+        Declaration::new(
+            "command_timeout",
+            Value::Double(args.command_timeout),
+            "Seconds without a command after which the arm holds where it is (0: never). Takes \
+             effect at the next cycle.",
+        )
+        .dynamic()
+        .float_range(0.0, 3600.0),
+        Declaration::new(
+            "gripper_torque_limit",
+            Value::Integer(i64::from(args.gripper_torque_limit)),
+            "Max_Torque_Limit of the gripper, of 1000.",
+        ),
+        Declaration::new(
+            "start_torque_off",
+            Value::Bool(args.start_torque_off),
+            "Started with torque off.",
+        ),
+        Declaration::new(
+            "keep_torque_on_exit",
+            Value::Bool(args.keep_torque_on_exit),
+            "Torque stays on when the node exits.",
+        ),
+        Declaration::new(
+            "write_calibration",
+            Value::Bool(args.write_calibration),
+            "Calibration values may be written into servos whose EPROM differs.",
+        ),
+        Declaration::new(
+            "reconnect_interval",
+            Value::Double(args.reconnect_interval),
+            "Seconds between reconnection attempts.",
+        ),
+        Declaration::new(
+            "reopen_after",
+            Value::Double(args.reopen_after),
+            "Seconds without a position read before the port is reopened.",
+        ),
+    ];
+    declarations.extend(joint_declarations(limits));
+    Parameters::new(declarations)
+}
+
+/// `safety` with an accepted change applied; `None` when the change is not a safety limit.
+pub fn safety_with(safety: SafetyConfig, name: &str, value: &Value) -> Option<SafetyConfig> {
+    match (name, value.as_f64()?) {
+        ("max_step", step) => Some(SafetyConfig {
+            max_step: step,
+            ..safety
+        }),
+        ("command_timeout", seconds) => Some(SafetyConfig {
+            command_timeout: (seconds > 0.0).then(|| Duration::from_secs_f64(seconds)),
+            ..safety
+        }),
+        _ => None,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::cli::Cli;
+    use clap::Parser;
+    use so101_core::robot::JOINT_LIMITS;
+
+    fn parameters() -> Parameters {
+        let cli = Cli::parse_from(["so101_feetech_driver", "--max-step", "0.05"]);
+        declarations(&cli.run, &JOINT_LIMITS)
+    }
+
+    #[test]
+    fn only_the_safety_limits_are_dynamic_and_each_applies() {
+        let safety = SafetyConfig {
+            max_step: 0.05,
+            command_timeout: None,
+        };
+        for declaration in parameters().declarations() {
+            let applied = safety_with(safety, declaration.name(), declaration.value());
+            assert_eq!(
+                applied.is_some(),
+                !declaration.read_only(),
+                "{}",
+                declaration.name()
+            );
+        }
+        let faster = safety_with(safety, "max_step", &Value::Double(0.2)).unwrap();
+        assert_eq!(faster.max_step, 0.2);
+        let watched = safety_with(safety, "command_timeout", &Value::Double(0.25)).unwrap();
+        assert_eq!(watched.command_timeout, Some(Duration::from_millis(250)));
+        let unwatched = safety_with(watched, "command_timeout", &Value::Double(0.0)).unwrap();
+        assert_eq!(unwatched.command_timeout, None);
+    }
+
+    #[test]
+    fn a_max_step_beyond_the_ceiling_or_zero_is_refused() {
+        let mut parameters = parameters();
+        let (results, changes) = parameters.set_each([
+            ("max_step".to_owned(), Ok(Value::Double(0.8))),
+            ("max_step".to_owned(), Ok(Value::Double(0.0))),
+        ]);
+        assert!(results.iter().all(|result| !result.successful));
+        assert!(changes.is_empty());
+        assert_eq!(parameters.get("max_step"), Some(&Value::Double(0.05)));
+    }
+}
