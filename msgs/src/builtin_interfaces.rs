@@ -15,6 +15,36 @@ crate::ros_message!(
     "int32 sec\nuint32 nanosec\n"
 );
 
+/// builtin_interfaces/Duration: a signed span of seconds and nanoseconds (nanosec < 1e9).
+#[derive(
+    Debug, Clone, Copy, Default, PartialEq, Eq, PartialOrd, Ord, Hash, Serialize, Deserialize,
+)]
+pub struct Duration {
+    pub sec: i32,
+    pub nanosec: u32,
+}
+crate::ros_message!(
+    Duration,
+    "builtin_interfaces",
+    "Duration",
+    "int32 sec\nuint32 nanosec\n"
+);
+
+impl Duration {
+    pub fn from_secs_f64(secs: f64) -> Self {
+        let Time { sec, nanosec } = Time::from_secs_f64(secs);
+        Self { sec, nanosec }
+    }
+
+    pub fn as_secs_f64(self) -> f64 {
+        Time {
+            sec: self.sec,
+            nanosec: self.nanosec,
+        }
+        .as_secs_f64()
+    }
+}
+
 impl Time {
     /// Time from nanoseconds; saturates at the limits of the `int32` seconds field.
     pub fn from_nanos(nanos: i64) -> Self {

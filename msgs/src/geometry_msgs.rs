@@ -83,6 +83,20 @@ crate::ros_message!(
     "float64 x\nfloat64 y\nfloat64 z\n"
 );
 
+/// geometry_msgs/Twist
+#[derive(Debug, Clone, Copy, Default, PartialEq, Serialize, Deserialize)]
+pub struct Twist {
+    pub linear: Vector3,
+    pub angular: Vector3,
+}
+crate::ros_message!(
+    Twist,
+    "geometry_msgs",
+    "Twist",
+    "Vector3 linear\nVector3 angular\n",
+    deps: [Vector3]
+);
+
 /// geometry_msgs/Transform
 #[derive(Debug, Clone, Copy, Default, PartialEq, Serialize, Deserialize)]
 pub struct Transform {

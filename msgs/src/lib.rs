@@ -7,6 +7,7 @@
 //! encoding is positional.
 
 pub mod builtin_interfaces;
+pub mod control_msgs;
 pub mod diagnostic_msgs;
 pub mod geometry_msgs;
 pub mod rcl_interfaces;
@@ -15,6 +16,7 @@ pub mod sensor_msgs;
 pub mod std_msgs;
 pub mod std_srvs;
 pub mod tf2_msgs;
+pub mod trajectory_msgs;
 mod type_info;
 
 pub use type_info::{RosMessage, RosService, TypeInfo};
@@ -34,3 +36,42 @@ macro_rules! ros_message {
     };
 }
 pub(crate) use ros_message;
+
+/// The definition text of an interface the stack defines beyond the common ones, by its full name
+/// (`pkg/msg/Name` or `pkg/action/Name`): what `ros2 interface show` prints, without comments.
+/// `so101_contract --interface NAME` prints it; the tests hash it with rosidl and compare with the
+/// published type hashes.
+pub fn interface_definition(full_name: &str) -> Option<&'static str> {
+    use control_msgs::{FollowJointTrajectory, JointComponentTolerance, JointTolerance};
+    use rcl_interfaces::{
+        FloatingPointRange, IntegerRange, ListParametersResult, Parameter, ParameterDescriptor,
+        ParameterEvent, ParameterValue, SetParametersResult,
+    };
+    use trajectory_msgs::{
+        JointTrajectory, JointTrajectoryPoint, MultiDofJointTrajectory,
+        MultiDofJointTrajectoryPoint,
+    };
+    if full_name == "control_msgs/action/FollowJointTrajectory" {
+        return Some(FollowJointTrajectory::DEFINITION);
+    }
+    let messages = [
+        JointTolerance::INFO,
+        JointComponentTolerance::INFO,
+        JointTrajectory::INFO,
+        JointTrajectoryPoint::INFO,
+        MultiDofJointTrajectory::INFO,
+        MultiDofJointTrajectoryPoint::INFO,
+        ParameterValue::INFO,
+        Parameter::INFO,
+        ParameterDescriptor::INFO,
+        FloatingPointRange::INFO,
+        IntegerRange::INFO,
+        SetParametersResult::INFO,
+        ListParametersResult::INFO,
+        ParameterEvent::INFO,
+    ];
+    messages
+        .into_iter()
+        .find(|info| info.full_name() == full_name)
+        .map(|info| info.definition)
+}

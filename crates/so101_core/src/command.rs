@@ -31,6 +31,11 @@ pub struct PartialTargets {
 }
 
 impl PartialTargets {
+    /// Targets already checked elsewhere (a validated trajectory's samples).
+    pub fn from_validated(targets: [Option<f64>; JOINT_COUNT]) -> Self {
+        Self { targets }
+    }
+
     pub fn get(&self, joint: usize) -> Option<f64> {
         self.targets[joint]
     }

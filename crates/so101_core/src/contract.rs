@@ -38,6 +38,10 @@ pub mod topics {
     /// sensor_msgs/CameraInfo of a camera, under `camera/<name>/`.
     pub const CAMERA_INFO: &str = "camera_info";
 
+    /// trajectory_msgs/JointTrajectory for the arm, where ros2_control's joint_trajectory_controller
+    /// named `arm_controller` listens.
+    pub const JOINT_TRAJECTORY: &str = "arm_controller/joint_trajectory";
+
     /// `camera/<name>/<leaf>` (leaf: [`IMAGE_RAW`], [`IMAGE_COMPRESSED`], [`CAMERA_INFO`]).
     pub fn camera(name: &str, leaf: &str) -> String {
         format!("{CAMERA_PREFIX}/{name}/{leaf}")
@@ -58,6 +62,13 @@ pub mod services {
     pub const RECORDER_DISCARD: &str = "recorder/discard";
     /// std_srvs/SetBool: marks the current (or last) episode a success or not.
     pub const RECORDER_MARK_SUCCESS: &str = "recorder/mark_success";
+}
+
+/// Actions, relative to the namespace.
+pub mod actions {
+    /// control_msgs/action/FollowJointTrajectory, as joint_trajectory_controller serves it (what
+    /// MoveIt's controller manager sends).
+    pub const FOLLOW_JOINT_TRAJECTORY: &str = "arm_controller/follow_joint_trajectory";
 }
 
 /// The cameras of the simulated scene, in the order the sim starts them.
@@ -83,7 +94,7 @@ pub fn python_module() -> String {
     }
     out += ")\n";
     out += &format!("CAMERA_NAMES = ({})\n\n", quoted(&CAMERA_NAMES));
-    out += "# Topics and services, relative to the namespace.\n";
+    out += "# Topics, services and actions, relative to the namespace.\n";
     let constants: &[(&str, &str)] = &[
         ("JOINT_STATES", topics::JOINT_STATES),
         ("JOINT_COMMANDS", topics::JOINT_COMMANDS),
@@ -102,6 +113,8 @@ pub fn python_module() -> String {
         ("IMAGE_RAW", topics::IMAGE_RAW),
         ("IMAGE_COMPRESSED", topics::IMAGE_COMPRESSED),
         ("CAMERA_INFO", topics::CAMERA_INFO),
+        ("JOINT_TRAJECTORY", topics::JOINT_TRAJECTORY),
+        ("FOLLOW_JOINT_TRAJECTORY", actions::FOLLOW_JOINT_TRAJECTORY),
         ("SIM_RESET", services::SIM_RESET),
         ("SIM_STEP", services::SIM_STEP),
         ("TORQUE_ENABLE", services::TORQUE_ENABLE),

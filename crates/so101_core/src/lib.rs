@@ -11,3 +11,4 @@ pub mod kinematics;
 pub mod robot;
 #[cfg(feature = "ros")]
 pub mod ros;
+pub mod trajectory;

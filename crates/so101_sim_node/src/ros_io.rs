@@ -50,6 +50,8 @@ pub struct Frame {
 pub struct NodeDiagnostics {
     pub accepted_commands: u64,
     pub rejected_commands: u64,
+    pub accepted_trajectories: u64,
+    pub rejected_trajectories: u64,
     pub episode: u64,
     pub physics_divergences: u64,
     pub pacing_resyncs: u64,
@@ -230,6 +232,8 @@ fn diagnostics_message(header: Header, diagnostics: &NodeDiagnostics) -> Diagnos
         values: vec![
             value("accepted_commands", diagnostics.accepted_commands),
             value("rejected_commands", diagnostics.rejected_commands),
+            value("accepted_trajectories", diagnostics.accepted_trajectories),
+            value("rejected_trajectories", diagnostics.rejected_trajectories),
             value("episode", diagnostics.episode),
             value("physics_divergences", diagnostics.physics_divergences),
             value("pacing_resyncs", diagnostics.pacing_resyncs),

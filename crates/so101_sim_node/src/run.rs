@@ -8,7 +8,8 @@ use std::{
 
 use anyhow::{Context, Result};
 use so101_core::ros::{
-    command_inbox::CommandInbox, parameters::ParameterServer, shutdown::Shutdown, RosNode,
+    arm_controller::ArmController, command_inbox::CommandInbox, parameters::ParameterServer,
+    shutdown::Shutdown, RosNode,
 };
 
 use so101_sim::{
@@ -70,6 +71,7 @@ pub fn run(args: Args) -> Result<()> {
     let mut node = RosNode::start("so101_sim_node", &args.node)?;
     let publisher = FramePublisher::start(&mut node)?;
     let inbox = CommandInbox::subscribe(&mut node)?;
+    let arm = ArmController::serve(&mut node)?;
     let services = SimServices::serve(&mut node)?;
     let cameras = start_cameras(&args, time_mode, &env, &mut node)?;
     let parameters = ParameterServer::start(
@@ -94,6 +96,7 @@ pub fn run(args: Args) -> Result<()> {
         env,
         publisher,
         inbox,
+        arm,
         services,
         parameters,
         pacer,
@@ -146,6 +149,8 @@ struct SimLoop {
     env: TaskEnv,
     publisher: FramePublisher,
     inbox: CommandInbox,
+    /// Trajectories (topic and FollowJointTrajectory action).
+    arm: ArmController,
     services: SimServices,
     parameters: ParameterServer,
     pacer: Pacer,
@@ -185,6 +190,7 @@ impl SimLoop {
             if intake_due {
                 last_intake = Instant::now();
                 self.apply_parameters();
+                self.take_trajectories();
                 if !commands_step {
                     self.apply_commands();
                 }
@@ -240,16 +246,28 @@ impl SimLoop {
         }
     }
 
-    /// Valid commands become the new targets (clamped); the first one ends the demo.
+    /// Valid commands become the new targets (clamped) and preempt a trajectory; new
+    /// trajectories start. The first of either ends the demo.
     fn apply_commands(&mut self) {
+        let limits = *self.env.world().limits();
         let commands = self.inbox.drain();
-        if !commands.is_empty() && self.demo.take().is_some() {
+        if !commands.is_empty() {
+            self.arm.preempt("a direct command arrived");
+        }
+        if (!commands.is_empty() || self.arm.is_active()) && self.demo.take().is_some() {
             tracing::info!("external command received: demo stopped");
         }
-        let limits = *self.env.world().limits();
         for targets in commands {
             targets.apply_clamped(self.env.world_mut().targets_mut(), &limits);
         }
+    }
+
+    /// Trajectories and goals that arrived replace the running one.
+    fn take_trajectories(&mut self) {
+        let world = self.env.world();
+        let limits = *world.limits();
+        self.arm
+            .take_new(world.time(), &world.arm_state().position, &limits);
     }
 
     /// Parameters set since the last look take effect now.
@@ -269,6 +287,7 @@ impl SimLoop {
 
     fn serve_resets(&mut self) {
         while let Some(call) = self.services.next_reset() {
+            self.arm.preempt("the simulation was reset");
             let start = self.env.reset(None);
             if let Some(rig) = &mut self.cameras {
                 rig.restart(self.env.world().time());
@@ -331,6 +350,7 @@ impl SimLoop {
         if self.demo.take().is_some() {
             tracing::info!("external command received: demo stopped");
         }
+        self.arm.preempt("a direct command arrived");
         let limits = *self.env.world().limits();
         for targets in commands {
             targets.apply_clamped(self.env.world_mut().targets_mut(), &limits);
@@ -378,18 +398,29 @@ impl SimLoop {
             *self.env.world_mut().targets_mut() =
                 script.targets_at(self.env.world().time() - self.demo_start);
         }
+        // The trajectory's setpoint for the end of this period.
+        let period_end = self.env.world().time() + 1.0 / self.args.rate;
+        if let Some(targets) = self.arm.targets(period_end) {
+            let limits = *self.env.world().limits();
+            targets.apply_clamped(self.env.world_mut().targets_mut(), &limits);
+        }
         if !self.env.advance() {
             self.diagnostics.physics_divergences += 1;
             tracing::warn!(
                 "the physics diverged (MuJoCo reset its state); the episode restarted from its start"
             );
         }
+        let arm = self.env.world().arm_state();
+        self.arm
+            .after_period(self.env.world().time(), &arm.position, &arm.velocity);
         if self.env.world().time() + 1e-9 < self.next_diagnostics {
             return None;
         }
         self.next_diagnostics = self.env.world().time() + DIAGNOSTICS_PERIOD;
         self.diagnostics.accepted_commands = self.inbox.tally.accepted;
         self.diagnostics.rejected_commands = self.inbox.tally.rejected;
+        self.diagnostics.accepted_trajectories = self.arm.accepted;
+        self.diagnostics.rejected_trajectories = self.arm.rejected;
         self.diagnostics.pacing_resyncs = self.pacer.resyncs;
         self.diagnostics.cameras = self.cameras.as_ref().map(CameraRig::diagnostics);
         Some(self.diagnostics.clone())

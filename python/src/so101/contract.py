@@ -13,7 +13,7 @@ JOINT_LIMITS = (
 )
 CAMERA_NAMES = ("top", "front", "wrist")
 
-# Topics and services, relative to the namespace.
+# Topics, services and actions, relative to the namespace.
 JOINT_STATES = "joint_states"
 JOINT_COMMANDS = "joint_commands"
 FORWARD_POSITION_COMMANDS = "forward_position_controller/commands"
@@ -28,6 +28,8 @@ CAMERA_PREFIX = "camera"
 IMAGE_RAW = "image_raw"
 IMAGE_COMPRESSED = "image_raw/compressed"
 CAMERA_INFO = "camera_info"
+JOINT_TRAJECTORY = "arm_controller/joint_trajectory"
+FOLLOW_JOINT_TRAJECTORY = "arm_controller/follow_joint_trajectory"
 SIM_RESET = "sim/reset"
 SIM_STEP = "sim/step"
 TORQUE_ENABLE = "torque_enable"

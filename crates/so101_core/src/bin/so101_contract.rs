@@ -8,17 +8,29 @@ use clap::Parser;
 #[derive(Parser)]
 #[command(version)]
 struct Cli {
-    /// Print the Python module (the only format so far).
+    /// Print the Python module.
     #[arg(long)]
     python: bool,
+    /// Print the definition of an interface the stack defines (e.g.
+    /// control_msgs/action/FollowJointTrajectory, trajectory_msgs/msg/JointTrajectory).
+    #[arg(long, value_name = "NAME")]
+    interface: Option<String>,
 }
 
 fn main() {
     let cli = Cli::parse();
     if cli.python {
         print!("{}", so101_core::contract::python_module());
+    } else if let Some(name) = cli.interface {
+        match so101_msgs::interface_definition(&name) {
+            Some(definition) => print!("{definition}"),
+            None => {
+                eprintln!("so101_contract: no interface {name:?} defined here");
+                std::process::exit(2);
+            }
+        }
     } else {
-        eprintln!("nothing to print: pass --python (see --help)");
+        eprintln!("nothing to print: pass --python or --interface NAME (see --help)");
         std::process::exit(2);
     }
 }

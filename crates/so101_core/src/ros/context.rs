@@ -69,6 +69,18 @@ pub fn create_context(environment: &RosEnvironment) -> Result<Context, ContextEr
         .map_err(|error| ContextError::Dds(error.to_string()))
 }
 
+/// Whether this process sees no network interface but loopback (inside `scripts/isolated`): DDS
+/// tests refuse to open a participant anywhere else, where multicast could leave the machine.
+pub fn only_loopback() -> bool {
+    std::fs::read_to_string("/proc/self/net/dev").is_ok_and(|devices| {
+        devices
+            .lines()
+            .skip(2)
+            .filter_map(|line| line.split(':').next())
+            .all(|name| name.trim() == "lo")
+    })
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -1,5 +1,6 @@
 //! ROS 2 plumbing shared by every node of the stack.
 
+pub mod arm_controller;
 pub mod clock;
 pub mod command_inbox;
 pub mod context;

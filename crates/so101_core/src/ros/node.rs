@@ -8,7 +8,7 @@
 //! [`super::clock::SimClock`].
 
 use ros2_client::{
-    Context, Node, NodeOptions, Publisher, QosProfile, Server, ServiceMapping, Subscription,
+    Context, Name, Node, NodeOptions, Publisher, QosProfile, Server, ServiceMapping, Subscription,
 };
 use serde::de::DeserializeOwned;
 use so101_msgs::{RosMessage, RosService};
@@ -97,6 +97,11 @@ impl RosNode {
         &self.node
     }
 
+    /// The ros2-client node, for entities the helpers here do not make (action servers).
+    pub fn node_mut(&mut self) -> &mut Node {
+        &mut self.node
+    }
+
     /// The ROS context (its DDS participant), for nodes that need DDS directly (raw readers).
     pub fn context(&self) -> &Context {
         &self.context
@@ -108,13 +113,8 @@ impl RosNode {
         relative: &str,
         qos: QosProfile,
     ) -> Result<Publisher<T>, NodeError> {
-        let topic = self.topic::<T>(relative, &qos)?;
-        self.node
-            .create_publisher(&topic, Some(qos))
-            .map_err(|error| NodeError::Create {
-                what: format!("publisher {relative}"),
-                reason: format!("{error:?}"),
-            })
+        let name = self.names.name(relative)?;
+        self.publisher_on::<T>(&name, relative, qos)
     }
 
     /// A publisher of `T` on the absolute name `absolute`, outside the node's namespace (rcl's
@@ -125,17 +125,20 @@ impl RosNode {
         qos: QosProfile,
     ) -> Result<Publisher<T>, NodeError> {
         let name = Names::new(None)?.name(absolute)?;
-        let topic = self
-            .node
-            .create_topic(&name, T::INFO.message_type_name(), &qos)
-            .map_err(|error| NodeError::Create {
-                what: format!("topic {absolute}"),
-                reason: format!("{error:?}"),
-            })?;
+        self.publisher_on::<T>(&name, absolute, qos)
+    }
+
+    fn publisher_on<T: RosMessage>(
+        &mut self,
+        name: &Name,
+        shown: &str,
+        qos: QosProfile,
+    ) -> Result<Publisher<T>, NodeError> {
+        let topic = self.topic::<T>(name, shown, &qos)?;
         self.node
             .create_publisher(&topic, Some(qos))
             .map_err(|error| NodeError::Create {
-                what: format!("publisher {absolute}"),
+                what: format!("publisher {shown}"),
                 reason: format!("{error:?}"),
             })
     }
@@ -146,7 +149,8 @@ impl RosNode {
         relative: &str,
         qos: QosProfile,
     ) -> Result<Subscription<T>, NodeError> {
-        let topic = self.topic::<T>(relative, &qos)?;
+        let name = self.names.name(relative)?;
+        let topic = self.topic::<T>(&name, relative, &qos)?;
         self.node
             .create_subscription(&topic, Some(qos))
             .map_err(|error| NodeError::Create {
@@ -205,14 +209,14 @@ impl RosNode {
 
     fn topic<T: RosMessage>(
         &self,
-        relative: &str,
+        name: &Name,
+        shown: &str,
         qos: &QosProfile,
     ) -> Result<ros2_client::dds::rustdds::Topic, NodeError> {
-        let name = self.names.name(relative)?;
         self.node
-            .create_topic(&name, T::INFO.message_type_name(), qos)
+            .create_topic(name, T::INFO.message_type_name(), qos)
             .map_err(|error| NodeError::Create {
-                what: format!("topic {relative}"),
+                what: format!("topic {shown}"),
                 reason: format!("{error:?}"),
             })
     }

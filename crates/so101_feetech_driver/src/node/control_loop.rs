@@ -5,9 +5,10 @@
 use std::time::{Duration, Instant};
 
 use anyhow::{Context, Result};
+use so101_core::robot::JointPositions;
 use so101_core::ros::{
-    command_inbox::CommandInbox, parameters::ParameterServer, rate_limit::RateLimiter,
-    shutdown::Shutdown, RosNode,
+    arm_controller::ArmController, command_inbox::CommandInbox, parameters::ParameterServer,
+    rate_limit::RateLimiter, shutdown::Shutdown, RosNode,
 };
 use so101_msgs::{
     builtin_interfaces::Time, diagnostic_msgs::DiagnosticArray, sensor_msgs::JointState,
@@ -101,10 +102,13 @@ pub fn run(args: RunArgs) -> Result<()> {
         "joint_states"
     };
     let outputs = Outputs::start(&mut node, joint_topic)?;
-    let inbox = if leader {
-        None
+    let (inbox, arm) = if leader {
+        (None, None)
     } else {
-        Some(CommandInbox::subscribe(&mut node)?)
+        (
+            Some(CommandInbox::subscribe(&mut node)?),
+            Some(ArmController::serve(&mut node)?),
+        )
     };
     let torque_service = TorqueService::serve(&mut node)?;
     let parameters = ParameterServer::start(
@@ -117,6 +121,8 @@ pub fn run(args: RunArgs) -> Result<()> {
         node_name: node_name.to_owned(),
         outputs,
         inbox,
+        arm,
+        last_positions: None,
         torque_service,
         parameters,
         stats: CycleStats::new(Instant::now()),
@@ -138,6 +144,10 @@ struct Driver {
     node_name: String,
     outputs: Outputs,
     inbox: Option<CommandInbox>,
+    /// Trajectories (topic and FollowJointTrajectory action); none on a leader arm.
+    arm: Option<ArmController>,
+    /// The latest plausible reading (where a trajectory starts from).
+    last_positions: Option<JointPositions>,
     torque_service: TorqueService,
     parameters: ParameterServer,
     stats: CycleStats,
@@ -185,13 +195,21 @@ impl Driver {
     }
 
     fn cycle(&mut self, now: Instant) {
+        // Trajectories run on wall time, the clock of their header stamps here.
+        let clock = Time::now().as_secs_f64();
         self.apply_parameters();
+        self.take_trajectories(clock);
         self.take_commands(now);
+        self.follow_trajectory(clock, now);
         self.serve_torque_requests();
         let output = self.controller.cycle(now);
         self.keep_last_words_line();
         if let Some(positions) = &output.positions {
+            self.last_positions = Some(*positions);
             self.publish_joints(positions, &output);
+            if let Some(arm) = self.arm.as_mut() {
+                arm.after_period(clock, positions, &output.velocities);
+            }
         }
         if !self.controller.is_connected() && self.args.rate.period().is_none() {
             std::thread::sleep(DISCONNECTED_REST);
@@ -227,11 +245,36 @@ impl Driver {
         emergency::set_line(line);
     }
 
+    /// New trajectories and goals, once the arm's position is known (they start from it).
+    fn take_trajectories(&mut self, clock: f64) {
+        if let (Some(arm), Some(positions)) = (self.arm.as_mut(), self.last_positions) {
+            arm.take_new(clock, &positions, self.controller.limits());
+        }
+    }
+
+    /// The running trajectory's setpoint becomes the command of this cycle (max_step and the
+    /// limits still apply in the controller).
+    fn follow_trajectory(&mut self, clock: f64, now: Instant) {
+        let Some(targets) = self.arm.as_ref().and_then(|arm| arm.targets(clock)) else {
+            return;
+        };
+        if !self.controller.command(&targets, now) {
+            if let Some(arm) = self.arm.as_mut() {
+                arm.preempt("the arm's position is unknown (bus fault)");
+            }
+        }
+    }
+
     fn take_commands(&mut self, now: Instant) {
         let Some(inbox) = self.inbox.as_mut() else {
             return;
         };
         let commands = inbox.drain();
+        if !commands.is_empty() {
+            if let Some(arm) = self.arm.as_mut() {
+                arm.preempt("a direct command arrived");
+            }
+        }
         let ignored = commands
             .iter()
             .filter(|command| !self.controller.command(command, now))
@@ -248,6 +291,9 @@ impl Driver {
 
     fn serve_torque_requests(&mut self) {
         while let Some((request, on)) = self.torque_service.next() {
+            if let Some(arm) = self.arm.as_mut() {
+                arm.preempt("torque was switched");
+            }
             let (success, message) = self.controller.request_torque(on);
             tracing::info!(on, success, %message, "torque_enable");
             self.torque_service.answer(request, success, message);
