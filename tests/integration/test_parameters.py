@@ -209,3 +209,22 @@ def test_rerun_bridge_image_rate_set_at_run_time(ros, tmp_path):
         assert not peer.set(image_rate=-1.0)[0].successful
     finally:
         assert bridge.stop() == 0, bridge.log_tail()
+
+
+def test_parameter_services_and_the_arm_controller_live_in_the_namespace(sim_factory, ros):
+    from rclpy.action import get_action_names_and_types
+
+    running = start_and_wait(sim_factory, ros, "--namespace", "arm1")
+    peer = ParameterPeer(ros, f"/arm1/{NODE_NAME}", running.sim)
+    assert set(peer.names()) == SIM_PARAMETERS
+    assert ros.node.count_subscribers("/arm1/arm_controller/joint_trajectory") == 1
+    wait_until(
+        lambda: (
+            ("/arm1/arm_controller/follow_joint_trajectory", ["control_msgs/action/FollowJointTrajectory"])
+            in get_action_names_and_types(ros.node)
+        ),
+        10,
+        "the FollowJointTrajectory action in the namespace",
+        running.sim,
+    )
+    assert ros.node.count_subscribers("/arm_controller/joint_trajectory") == 0

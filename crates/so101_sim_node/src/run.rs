@@ -410,9 +410,11 @@ impl SimLoop {
                 "the physics diverged (MuJoCo reset its state); the episode restarted from its start"
             );
         }
-        let arm = self.env.world().arm_state();
-        self.arm
-            .after_period(self.env.world().time(), &arm.position, &arm.velocity);
+        if self.arm.is_active() {
+            let arm = self.env.world().arm_state();
+            self.arm
+                .after_period(self.env.world().time(), &arm.position, &arm.velocity);
+        }
         if self.env.world().time() + 1e-9 < self.next_diagnostics {
             return None;
         }
