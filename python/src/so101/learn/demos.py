@@ -10,7 +10,6 @@ path per cube placement; failed expert episodes stay out of the dataset unless -
 
 from __future__ import annotations
 
-import argparse
 import re
 import shlex
 import subprocess
@@ -19,16 +18,14 @@ import time
 from pathlib import Path
 
 from ..paths import repo_root
+from .recipe import recipe_parser
 
 REPO_ID = "local/so101_demos"
 
 
 def add_parser(recipes, name: str) -> None:
-    p = recipes.add_parser(
-        name,
-        help="record N expert demonstrations through the stack and convert them into a LeRobot dataset",
-        description=__doc__,
-        formatter_class=argparse.RawDescriptionHelpFormatter,
+    p = recipe_parser(
+        recipes, name, "record N expert demonstrations through the stack and convert them into a LeRobot dataset", __doc__
     )
     p.add_argument("--episodes", type=int, default=50, help="demonstrations to record")
     p.add_argument("--seed", type=int, default=0, help="seed of the sim's cube placements and the expert's noise")

@@ -15,7 +15,6 @@ Which way depends on POLICY:
 
 from __future__ import annotations
 
-import argparse
 import dataclasses
 import json
 import subprocess
@@ -25,6 +24,7 @@ from pathlib import Path
 
 import numpy as np
 
+from .recipe import recipe_parser
 from .wrappers import SETTINGS_FILE, EnvSettings
 
 VEC_NORMALIZE_FILE = "vecnormalize.pkl"
@@ -33,12 +33,7 @@ TASKS = ["cube_to_bin", "touch_cube", "touch_cube_sparse"]
 
 
 def add_parser(subparsers, name: str) -> None:
-    p = subparsers.add_parser(
-        name,
-        help="evaluate a policy (bc, sac or LeRobot) over M seeded episodes",
-        description=__doc__,
-        formatter_class=argparse.RawDescriptionHelpFormatter,
-    )
+    p = recipe_parser(subparsers, name, "evaluate a policy (bc, sac or LeRobot) over M seeded episodes", __doc__)
     p.add_argument("policy", help="so101-learn bc/sac output (directory or model file), or a LeRobot policy")
     p.add_argument("--eval", type=int, default=50, metavar="M", help="episodes")
     p.add_argument("--seed", type=int, default=1000, help="seed of the first episode (then seed+1, ...)")
@@ -160,22 +155,54 @@ def evaluate_saved(
     return summary
 
 
-def run_policy_command(args, output: str) -> list[str]:
-    """so101-run-policy's command line for a LeRobot policy, inside scripts/isolated when this
-    process is not in a private network namespace already."""
+def run_policy_command(
+    policy: str,
+    *,
+    episodes: int,
+    seed: int,
+    output: str,
+    backend: str,
+    videos: int | None = None,
+    sim_task: str | None = None,
+    episode_time: float | None = None,
+    lite: bool = False,
+    device: str | None = None,
+    quiet: bool = False,
+) -> list[str]:
+    """so101-run-policy's evaluation of a LeRobot policy (every recipe evaluates through it), inside
+    scripts/isolated when this process is not in a private network namespace already. `videos`:
+    how many episodes are filmed (None: so101-run-policy's default, every one)."""
     from ..isolation import isolated_command
 
-    command = [sys.executable, "-m", "so101.run_policy", args.policy, "--eval", str(args.eval), "--seed", str(args.seed)]
-    command += ["--output", output, "--backend", args.backend, "--sim-task", args.sim_task or "cube_to_bin"]
-    if args.episode_time:
-        command += ["--episode-time", str(args.episode_time)]
-    if args.lite:
+    command = [sys.executable, "-m", "so101.run_policy", policy, f"--eval={episodes}", f"--seed={seed}"]
+    command += [f"--output={output}", f"--backend={backend}", f"--sim-task={sim_task or 'cube_to_bin'}"]
+    if episode_time:
+        command.append(f"--episode-time={episode_time}")
+    if lite:
         command.append("--lite")
-    if not args.videos:
-        command.append("--videos=0")
-    if args.quiet:
+    if device:
+        command.append(f"--device={device}")
+    if videos is not None:
+        command.append(f"--videos={videos}")
+    if quiet:
         command.append("--quiet")
     return isolated_command(command)
+
+
+def lerobot_eval_command(args, output: str) -> list[str]:
+    """`so101-learn eval` of a LeRobot policy: so101-run-policy with this command's options."""
+    return run_policy_command(
+        args.policy,
+        episodes=args.eval,
+        seed=args.seed,
+        output=output,
+        backend=args.backend,
+        videos=None if args.videos else 0,
+        sim_task=args.sim_task,
+        episode_time=args.episode_time,
+        lite=args.lite,
+        quiet=args.quiet,
+    )
 
 
 def run(args) -> int:
@@ -186,7 +213,7 @@ def run(args) -> int:
     name = Path(args.policy.rstrip("/")).name or "policy"
     output = args.output or str(repo_root() / "eval" / f"{name}-{time.strftime('%Y%m%d-%H%M%S')}")
     if find_saved(args.policy) is None:
-        command = run_policy_command(args, output)
+        command = lerobot_eval_command(args, output)
         print("so101-learn eval: " + " ".join(command), flush=True)
         return subprocess.run(command).returncode
     import torch

@@ -20,7 +20,6 @@ Why these settings (LeRobot's defaults are sized for images on a GPU: 28 s a ste
 
 from __future__ import annotations
 
-import argparse
 import json
 import os
 import subprocess
@@ -28,8 +27,9 @@ import sys
 import time
 from pathlib import Path
 
-from ..isolation import isolated_command
 from ..paths import repo_root
+from .evaluate import run_policy_command
+from .recipe import recipe_parser
 
 NORMALIZE_ALL = '{"VISUAL":"MEAN_STD","STATE":"MEAN_STD","ENV":"MEAN_STD","ACTION":"MEAN_STD"}'
 
@@ -66,11 +66,11 @@ PRESETS: dict[str, dict] = {
 
 def add_parser(recipes, name: str) -> None:
     preset = PRESETS[name]
-    p = recipes.add_parser(
+    p = recipe_parser(
+        recipes,
         name,
-        help=f"train LeRobot's {'ACT' if name == 'act' else 'Diffusion Policy'} on the state with lerobot-train (CPU-sized), then evaluate it",
-        description=__doc__,
-        formatter_class=argparse.RawDescriptionHelpFormatter,
+        f"train LeRobot's {'ACT' if name == 'act' else 'Diffusion Policy'} on the state with lerobot-train (CPU-sized), then evaluate it",
+        __doc__,
     )
     p.add_argument("--dataset", required=True, help="a LeRobot dataset directory (so101-learn demos, so101-bag-to-lerobot)")
     p.add_argument("--steps", type=int, default=preset["steps"], help="training steps")
@@ -127,11 +127,18 @@ def train_command(args, output: Path) -> list[str]:
 
 
 def eval_command(args, checkpoint: Path, eval_dir: Path) -> list[str]:
-    command = [sys.executable, "-m", "so101.run_policy", str(checkpoint), f"--eval={args.eval}", f"--seed={args.eval_seed}"]
-    command += [f"--backend={args.eval_backend}", f"--output={eval_dir}", "--lite", f"--device={args.device}"]
     # MP4s of the first episodes only: filming costs more than the rest of an episode.
-    command += [f"--videos={min(args.eval, args.eval_videos)}"]
-    return isolated_command(command + (["--quiet"] if args.quiet else []))
+    return run_policy_command(
+        str(checkpoint),
+        episodes=args.eval,
+        seed=args.eval_seed,
+        output=str(eval_dir),
+        backend=args.eval_backend,
+        videos=min(args.eval, args.eval_videos),
+        lite=True,
+        device=args.device,
+        quiet=args.quiet,
+    )
 
 
 def run(args) -> int:

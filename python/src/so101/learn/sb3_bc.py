@@ -19,7 +19,6 @@ Evaluate again, with videos: so101-learn eval OUTPUT --videos.
 
 from __future__ import annotations
 
-import argparse
 import json
 import time
 import warnings
@@ -29,6 +28,7 @@ import numpy as np
 from tqdm import tqdm
 
 from ..paths import repo_root
+from .recipe import recipe_parser
 from .wrappers import MAX_STEP, SETTINGS_FILE, EnvSettings, flatten, relative_action
 
 # Floor of the standardization's scale: the cube's height and tilt hardly vary while it rests.
@@ -38,12 +38,7 @@ POLICY_FILE = "policy.pth"
 
 
 def add_parser(subparsers, name: str) -> None:
-    p = subparsers.add_parser(
-        name,
-        help="behaviour cloning (imitation) on in-process expert demonstrations",
-        description=__doc__,
-        formatter_class=argparse.RawDescriptionHelpFormatter,
-    )
+    p = recipe_parser(subparsers, name, "behaviour cloning (imitation) on in-process expert demonstrations", __doc__)
     demos = p.add_argument_group("demonstrations")
     demos.add_argument("--demos", type=int, default=100, metavar="N", help="expert episodes to run (failed ones are dropped)")
     demos.add_argument("--waypoint-noise", type=float, default=0.005, help="the expert's waypoint noise (m)")

@@ -22,7 +22,6 @@ Evaluate again, with videos: so101-learn eval OUTPUT --videos.
 
 from __future__ import annotations
 
-import argparse
 import csv
 import json
 import shutil
@@ -33,6 +32,7 @@ import numpy as np
 
 from ..paths import repo_root
 from .evaluate import VEC_NORMALIZE_FILE
+from .recipe import recipe_parser
 from .wrappers import MAX_STEP, SETTINGS_FILE, EnvSettings
 
 MODEL_FILE = "model.zip"
@@ -42,12 +42,7 @@ PROGRESS_FIELDS = ["timesteps", "episodes", "successes", "success_rate", "ci95_l
 
 
 def add_parser(subparsers, name: str) -> None:
-    p = subparsers.add_parser(
-        name,
-        help="SAC (Stable-Baselines3) on the dense reward, success rate over training",
-        description=__doc__,
-        formatter_class=argparse.RawDescriptionHelpFormatter,
-    )
+    p = recipe_parser(subparsers, name, "SAC (Stable-Baselines3) on the dense reward, success rate over training", __doc__)
     p.add_argument("--task", choices=["touch_cube", "cube_to_bin"], default="touch_cube")
     p.add_argument("--steps", type=int, default=50_000, help="environment steps in all (with --resume: the total to reach)")
     p.add_argument("--n-envs", type=int, default=1, help="worlds stepped together (one gradient step per vector step)")
