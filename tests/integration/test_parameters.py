@@ -39,16 +39,16 @@ def test_sim_parameters_list_get_describe(sim_factory, ros):
     peer = ParameterPeer(ros, f"/{NODE_NAME}", running.sim)
     assert set(peer.names()) == SIM_PARAMETERS
     assert_documented(peer, NODE_NAME)
-    rate, seed, task, names, missing = peer.get("rate", "seed", "task", "joints.names", "no_such_thing")
+    rate, seed, task, names = peer.get("rate", "seed", "task", "joints.names")
     assert (rate, seed, task) == (50.0, 7, "cube_to_bin")
     assert names[0] == "shoulder_pan" and len(names) == 6
-    assert missing is None  # NOT_SET
-    assert peer.types("rate", "lite", "cameras", "nope") == [
+    assert peer.types("rate", "lite", "cameras") == [
         ParameterType.PARAMETER_DOUBLE,
         ParameterType.PARAMETER_BOOL,
         ParameterType.PARAMETER_STRING_ARRAY,
-        ParameterType.PARAMETER_NOT_SET,
     ]
+    # An undeclared name empties the answer, as rclcpp and rclpy nodes answer.
+    assert peer.get("rate", "no_such_thing") == [] and peer.types("rate", "nope") == []
     rate, camera_rate = peer.describe("rate", "camera_rate")
     assert rate.read_only and not camera_rate.read_only
     assert "Control rate" in rate.description

@@ -110,7 +110,8 @@ def test_a_direct_command_preempts_the_trajectory(sim_factory, ros):
     wait_reached(running, here, tolerance=0.03)
     time.sleep(1.0)
     latest = running.current_positions()
-    assert abs(latest["shoulder_pan"] - far["shoulder_pan"]) > 0.2, "the trajectory kept going after the command"
+    moved = {name: round(latest[name] - here[name], 4) for name in JOINT_NAMES}
+    assert max(abs(d) for d in moved.values()) < 0.03, f"the trajectory kept going after the command: {moved}"
 
 
 def test_malformed_trajectories_are_refused_whole(sim_factory, ros):
@@ -161,10 +162,14 @@ def test_the_driver_follows_a_trajectory_within_its_max_step(arm_factory, ros):
         "the trajectory's end",
         node,
     )
-    pans = [position(m, "shoulder_pan") for m in states.messages()]
-    steps = [abs(b - a) for a, b in zip(pans, pans[1:])]
-    assert max(steps) <= 0.02 + 0.003, f"a cycle moved {max(steps):.4f} rad (max_step 0.02)"
-    assert len(pans) >= 15, "0.4 rad at 0.02 rad a cycle takes at least 20 cycles"
+    messages = states.messages()
+    for name in JOINT_NAMES:
+        path = [position(m, name) for m in messages]
+        steps = [abs(b - a) for a, b in zip(path, path[1:])]
+        assert max(steps) <= 0.02 + 0.003, f"{name} moved {max(steps):.4f} rad in a cycle (max_step 0.02)"
+    assert len(messages) >= 15, "0.4 rad at 0.02 rad a cycle takes at least 20 cycles"
+    # Arrived, the last point is no longer re-sent: the watchdog (0.5 s) acts as after any command.
+    wait_until(lambda: "no command for longer than the timeout" in node.log(), 5, "the watchdog after the hold", node)
 
 
 # Published RIHS01 type hashes of control_msgs 5.x (ROS 2 Jazzy): a colcon build of control_msgs
@@ -272,3 +277,14 @@ def test_trajectory_and_parameter_messages_hash_as_the_jazzy_packages(tmp_path):
             description = json.loads((Path(sys.prefix) / "share" / package / "msg" / f"{name}.json").read_text())
             expected = next(h["hash_string"] for h in description["type_hashes"] if h["type_name"] == f"{package}/msg/{name}")
             assert hashes[f"{package}/msg/{name}"] == expected, f"{package}/{name}"
+
+
+def test_the_driver_refuses_trajectories_while_torque_is_off(arm_factory, ros):
+    node, _emulator = arm_factory("--start-torque-off")
+    states = ros.subscribe("/joint_states", JointState, reliable_qos(1000))
+    states.wait_count(5, 30.0, node)
+    latest = states.latest()
+    start = dict(zip(latest.name, latest.position))
+    publisher = ros.publisher(TOPIC, JointTrajectory, sim=node)
+    publisher.publish(trajectory([(0.5, {"shoulder_pan": start["shoulder_pan"] + 0.3})], velocities=False))
+    wait_until(lambda: "trajectory refused: torque is off" in node.log(), 10, "the refusal", node)

@@ -168,6 +168,15 @@ impl Trajectory {
         self.points.last().map_or(&[], |point| &point.positions)
     }
 
+    /// The last point as targets (joints not named: none).
+    pub fn final_targets(&self) -> PartialTargets {
+        let mut targets = [None; JOINT_COUNT];
+        for (&joint, &position) in self.joints.iter().zip(self.final_positions()) {
+            targets[joint] = Some(position);
+        }
+        PartialTargets::from_validated(targets)
+    }
+
     /// Positions and velocities (trajectory's joint order) `t` s after the start, having started
     /// from `start` (every joint, at rest).
     pub fn sample(&self, start: &JointPositions, t: f64) -> (Vec<f64>, Vec<f64>) {
@@ -294,7 +303,7 @@ pub struct Follower {
 }
 
 impl Follower {
-    /// Starts `trajectory` at time `started` (the node's clock, s) from the targets `start`.
+    /// Starts `trajectory` at time `started` (the node's clock, s) from the positions `start`.
     pub fn new(
         trajectory: Trajectory,
         started: f64,

@@ -254,7 +254,7 @@ impl SimLoop {
         if !commands.is_empty() {
             self.arm.preempt("a direct command arrived");
         }
-        if (!commands.is_empty() || self.arm.is_active()) && self.demo.take().is_some() {
+        if (!commands.is_empty() || self.arm.is_busy()) && self.demo.take().is_some() {
             tracing::info!("external command received: demo stopped");
         }
         for targets in commands {
@@ -267,7 +267,7 @@ impl SimLoop {
         let world = self.env.world();
         let limits = *world.limits();
         self.arm
-            .take_new(world.time(), &world.arm_state().position, &limits);
+            .take_new(world.time(), &world.arm_state().position, &limits, None);
     }
 
     /// Parameters set since the last look take effect now.
@@ -323,7 +323,8 @@ impl SimLoop {
             return false;
         }
         for call in calls {
-            // A command sent before this /sim/step call must act in this very step.
+            // A command or trajectory sent before this /sim/step call must act in this very step.
+            self.take_trajectories();
             if !self.args.step_on_command {
                 self.apply_commands();
             }
@@ -405,12 +406,13 @@ impl SimLoop {
             targets.apply_clamped(self.env.world_mut().targets_mut(), &limits);
         }
         if !self.env.advance() {
+            self.arm.preempt("the physics diverged");
             self.diagnostics.physics_divergences += 1;
             tracing::warn!(
                 "the physics diverged (MuJoCo reset its state); the episode restarted from its start"
             );
         }
-        if self.arm.is_active() {
+        if self.arm.is_busy() {
             let arm = self.env.world().arm_state();
             self.arm
                 .after_period(self.env.world().time(), &arm.position, &arm.velocity);

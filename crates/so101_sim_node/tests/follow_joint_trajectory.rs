@@ -10,7 +10,7 @@ use std::{
 
 use ros2_client::{
     action::{ActionClient, ActionClientQosPolicies},
-    action_msgs::GoalStatusEnum,
+    action_msgs::{CancelGoalResponseEnum, GoalStatusEnum},
     ServiceMapping,
 };
 use so101_core::{
@@ -245,6 +245,13 @@ fn a_newer_goal_preempts_and_a_cancel_stops_the_running_one() {
         outcome.error_string.contains("newer trajectory"),
         "{outcome:?}"
     );
+    // Canceling the ended goal leaves the running one alone.
+    let request = client.cancel_goal(first).expect("the cancel is sent");
+    let response = wait_for("the cancel response", Duration::from_secs(10), || {
+        client.receive_cancel_response(request).ok().flatten()
+    });
+    assert_eq!(response.return_code, CancelGoalResponseEnum::GoalTerminated);
+    assert!(response.goals_canceling.is_empty());
     let request = client.cancel_goal(second).expect("the cancel is sent");
     let response = wait_for("the cancel response", Duration::from_secs(10), || {
         client.receive_cancel_response(request).ok().flatten()

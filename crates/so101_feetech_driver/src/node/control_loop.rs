@@ -5,7 +5,6 @@
 use std::time::{Duration, Instant};
 
 use anyhow::{Context, Result};
-use so101_core::robot::JointPositions;
 use so101_core::ros::{
     arm_controller::ArmController, command_inbox::CommandInbox, parameters::ParameterServer,
     rate_limit::RateLimiter, shutdown::Shutdown, RosNode,
@@ -122,7 +121,7 @@ pub fn run(args: RunArgs) -> Result<()> {
         outputs,
         inbox,
         arm,
-        last_positions: None,
+        clock_origin: (Time::now().as_secs_f64(), Instant::now()),
         torque_service,
         parameters,
         stats: CycleStats::new(Instant::now()),
@@ -146,8 +145,10 @@ struct Driver {
     inbox: Option<CommandInbox>,
     /// Trajectories (topic and FollowJointTrajectory action); none on a leader arm.
     arm: Option<ArmController>,
-    /// The latest plausible reading (where a trajectory starts from).
-    last_positions: Option<JointPositions>,
+    /// Wall time and the instant it was read at start: trajectories run on wall time (the clock of
+    /// their header stamps) counted from there on the monotonic clock, so a clock step (NTP) does
+    /// not jump a trajectory's setpoint.
+    clock_origin: (f64, Instant),
     torque_service: TorqueService,
     parameters: ParameterServer,
     stats: CycleStats,
@@ -195,8 +196,7 @@ impl Driver {
     }
 
     fn cycle(&mut self, now: Instant) {
-        // Trajectories run on wall time, the clock of their header stamps here.
-        let clock = Time::now().as_secs_f64();
+        let clock = self.clock_origin.0 + (now - self.clock_origin.1).as_secs_f64();
         self.apply_parameters();
         self.take_trajectories(clock);
         self.take_commands(now);
@@ -205,7 +205,6 @@ impl Driver {
         let output = self.controller.cycle(now);
         self.keep_last_words_line();
         if let Some(positions) = &output.positions {
-            self.last_positions = Some(*positions);
             self.publish_joints(positions, &output);
             if let Some(arm) = self.arm.as_mut() {
                 arm.after_period(clock, positions, &output.velocities);
@@ -245,11 +244,26 @@ impl Driver {
         emergency::set_line(line);
     }
 
-    /// New trajectories and goals, once the arm's position is known (they start from it).
+    /// New trajectories and goals: refused while torque is off or the arm's position is unknown
+    /// (they start from it); torque gone (the user, a fault) ends the running one.
     fn take_trajectories(&mut self, clock: f64) {
-        if let (Some(arm), Some(positions)) = (self.arm.as_mut(), self.last_positions) {
-            arm.take_new(clock, &positions, self.controller.limits());
+        let Some(arm) = self.arm.as_mut() else {
+            return;
+        };
+        let torque_on = self.controller.torque_is_on();
+        if !torque_on && arm.is_busy() {
+            arm.preempt("torque is off");
         }
+        let present = self.controller.present_positions();
+        let refusal = if !torque_on {
+            Some("torque is off: call /torque_enable true first")
+        } else if present.is_none() {
+            Some("the arm's position is unknown (bus fault)")
+        } else {
+            None
+        };
+        let start = present.unwrap_or([0.0; so101_core::robot::JOINT_COUNT]);
+        arm.take_new(clock, &start, self.controller.limits(), refusal);
     }
 
     /// The running trajectory's setpoint becomes the command of this cycle (max_step and the

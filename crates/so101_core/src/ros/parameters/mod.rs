@@ -3,6 +3,7 @@
 
 pub mod server;
 pub mod store;
+pub mod value;
 
 pub use server::ParameterServer;
 pub use store::{Change, Declaration, Parameters, Value};

@@ -9,143 +9,7 @@ use so101_msgs::rcl_interfaces::{
     ParameterValue as ValueMessage, SetParametersResult,
 };
 
-/// A parameter's value (the rcl types the stack uses).
-#[derive(Debug, Clone, PartialEq)]
-pub enum Value {
-    Bool(bool),
-    Integer(i64),
-    Double(f64),
-    String(String),
-    DoubleArray(Vec<f64>),
-    StringArray(Vec<String>),
-}
-
-impl Value {
-    /// A command-line choice as its name on the command line.
-    pub fn choice(value: &impl clap::ValueEnum) -> Self {
-        Value::String(
-            value
-                .to_possible_value()
-                .map(|possible| possible.get_name().to_owned())
-                .unwrap_or_default(),
-        )
-    }
-
-    /// The rcl_interfaces/ParameterType constant.
-    pub fn kind(&self) -> u8 {
-        match self {
-            Value::Bool(_) => ValueMessage::BOOL,
-            Value::Integer(_) => ValueMessage::INTEGER,
-            Value::Double(_) => ValueMessage::DOUBLE,
-            Value::String(_) => ValueMessage::STRING,
-            Value::DoubleArray(_) => ValueMessage::DOUBLE_ARRAY,
-            Value::StringArray(_) => ValueMessage::STRING_ARRAY,
-        }
-    }
-
-    pub fn as_f64(&self) -> Option<f64> {
-        match self {
-            Value::Double(value) => Some(*value),
-            _ => None,
-        }
-    }
-
-    pub fn as_i64(&self) -> Option<i64> {
-        match self {
-            Value::Integer(value) => Some(*value),
-            _ => None,
-        }
-    }
-
-    pub fn as_bool(&self) -> Option<bool> {
-        match self {
-            Value::Bool(value) => Some(*value),
-            _ => None,
-        }
-    }
-
-    pub fn as_str(&self) -> Option<&str> {
-        match self {
-            Value::String(value) => Some(value),
-            _ => None,
-        }
-    }
-
-    pub fn as_strings(&self) -> Option<&[String]> {
-        match self {
-            Value::StringArray(values) => Some(values),
-            _ => None,
-        }
-    }
-
-    /// The wire form.
-    pub fn to_message(&self) -> ValueMessage {
-        let mut message = ValueMessage {
-            kind: self.kind(),
-            ..ValueMessage::default()
-        };
-        match self {
-            Value::Bool(value) => message.bool_value = *value,
-            Value::Integer(value) => message.integer_value = *value,
-            Value::Double(value) => message.double_value = *value,
-            Value::String(value) => message.string_value = value.clone(),
-            Value::DoubleArray(values) => message.double_array_value = values.clone(),
-            Value::StringArray(values) => message.string_array_value = values.clone(),
-        }
-        message
-    }
-
-    /// The value a request carries; `Err` names a type no parameter here has (or NOT_SET).
-    pub fn from_message(message: &ValueMessage) -> Result<Self, String> {
-        Ok(match message.kind {
-            ValueMessage::BOOL => Value::Bool(message.bool_value),
-            ValueMessage::INTEGER => Value::Integer(message.integer_value),
-            ValueMessage::DOUBLE => Value::Double(message.double_value),
-            ValueMessage::STRING => Value::String(message.string_value.clone()),
-            ValueMessage::DOUBLE_ARRAY => Value::DoubleArray(message.double_array_value.clone()),
-            ValueMessage::STRING_ARRAY => Value::StringArray(message.string_array_value.clone()),
-            ValueMessage::NOT_SET => {
-                return Err("parameters of this node cannot be undeclared".to_owned())
-            }
-            other => {
-                return Err(format!(
-                    "no parameter of this node has type {}",
-                    type_name(other)
-                ))
-            }
-        })
-    }
-}
-
-impl std::fmt::Display for Value {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        match self {
-            Value::Bool(value) => write!(f, "{value}"),
-            Value::Integer(value) => write!(f, "{value}"),
-            Value::Double(value) => write!(f, "{value}"),
-            Value::String(value) => write!(f, "{value:?}"),
-            Value::DoubleArray(values) => write!(f, "{values:?}"),
-            Value::StringArray(values) => write!(f, "{values:?}"),
-        }
-    }
-}
-
-/// The name `ros2 param describe` prints for a type constant.
-pub fn type_name(kind: u8) -> &'static str {
-    match kind {
-        ValueMessage::NOT_SET => "not set",
-        ValueMessage::BOOL => "boolean",
-        ValueMessage::INTEGER => "integer",
-        ValueMessage::DOUBLE => "double",
-        ValueMessage::STRING => "string",
-        ValueMessage::BYTE_ARRAY => "byte array",
-        ValueMessage::BOOL_ARRAY => "boolean array",
-        ValueMessage::INTEGER_ARRAY => "integer array",
-        ValueMessage::DOUBLE_ARRAY => "double array",
-        ValueMessage::STRING_ARRAY => "string array",
-        _ => "unknown",
-    }
-}
+pub use super::value::{type_name, Value};
 
 /// A further rule on a value, beyond its type and range.
 pub type Check = fn(&Value) -> Result<(), String>;
@@ -332,8 +196,9 @@ impl Parameters {
         self.declared.values()
     }
 
-    /// rcl's ListParameters: names under any of `prefixes` (all when none), at most `depth` levels
-    /// of '.'-separated names below the prefix (0: any depth), and the prefixes of those names.
+    /// rcl's ListParameters: names under any of `prefixes` (all when none), with fewer than
+    /// `depth` '.' separators below the prefix, counting the one after it, as rclcpp counts (0:
+    /// any depth), and the prefixes of those names.
     pub fn list(&self, prefixes: &[String], depth: u64) -> ListParametersResult {
         let within_depth = |rest: &str| depth == 0 || (rest.matches('.').count() as u64) < depth;
         let mut result = ListParametersResult::default();
@@ -345,7 +210,7 @@ impl Parameters {
                     name == prefix
                         || name
                             .strip_prefix(prefix.as_str())
-                            .and_then(|rest| rest.strip_prefix('.'))
+                            .filter(|rest| rest.starts_with('.'))
                             .is_some_and(within_depth)
                 })
             };
@@ -362,20 +227,23 @@ impl Parameters {
         result
     }
 
-    /// rcl's GetParameters: the values, NOT_SET for an undeclared name.
+    /// rcl's GetParameters: the values; none at all when a name is not declared (as rclcpp and
+    /// rclpy answer).
     pub fn values(&self, names: &[String]) -> Vec<ValueMessage> {
         names
             .iter()
-            .map(|name| self.get(name).map(Value::to_message).unwrap_or_default())
-            .collect()
+            .map(|name| self.get(name).map(Value::to_message))
+            .collect::<Option<_>>()
+            .unwrap_or_default()
     }
 
-    /// rcl's GetParameterTypes: NOT_SET (0) for an undeclared name.
+    /// rcl's GetParameterTypes: none at all when a name is not declared (as rclcpp answers).
     pub fn types(&self, names: &[String]) -> Vec<u8> {
         names
             .iter()
-            .map(|name| self.get(name).map_or(ValueMessage::NOT_SET, Value::kind))
-            .collect()
+            .map(|name| self.get(name).map(Value::kind))
+            .collect::<Option<_>>()
+            .unwrap_or_default()
     }
 
     /// rcl's DescribeParameters; `Err` names the first undeclared parameter (rclcpp refuses the
@@ -502,22 +370,29 @@ mod tests {
         assert_eq!(all.prefixes, ["cameras", "cameras.top"]);
         let top_level = parameters().list(&[], 1);
         assert_eq!(top_level.names, ["episodes", "max_step", "rate", "topics"]);
-        let cameras = parameters().list(&["cameras".into()], 1);
+        // rclcpp counts the separator after the prefix: depth 1 lists the prefix itself only.
+        assert!(parameters().list(&["cameras".into()], 1).names.is_empty());
+        let cameras = parameters().list(&["cameras".into()], 2);
         assert_eq!(cameras.names, ["cameras.rate"]);
         let cameras = parameters().list(&["cameras".into()], 0);
         assert_eq!(cameras.names, ["cameras.rate", "cameras.top.size"]);
     }
 
     #[test]
-    fn values_and_types_report_not_set_for_unknown_names() {
+    fn an_undeclared_name_empties_the_answer_as_in_rclcpp() {
         let parameters = parameters();
-        let names = vec!["max_step".to_owned(), "nope".to_owned()];
-        let values = parameters.values(&names);
+        let known = vec!["max_step".to_owned(), "rate".to_owned()];
+        let values = parameters.values(&known);
         assert_eq!(values[0].kind, ValueMessage::DOUBLE);
         assert_eq!(values[0].double_value, 0.1);
-        assert_eq!(values[1].kind, ValueMessage::NOT_SET);
-        assert_eq!(parameters.types(&names), [ValueMessage::DOUBLE, 0]);
-        assert!(parameters.describe(&names).unwrap_err().contains("'nope'"));
+        assert_eq!(parameters.types(&known), [ValueMessage::DOUBLE; 2]);
+        let with_unknown = vec!["max_step".to_owned(), "nope".to_owned()];
+        assert!(parameters.values(&with_unknown).is_empty());
+        assert!(parameters.types(&with_unknown).is_empty());
+        assert!(parameters
+            .describe(&with_unknown)
+            .unwrap_err()
+            .contains("'nope'"));
     }
 
     #[test]
@@ -594,22 +469,5 @@ mod tests {
         assert!(result.successful);
         assert_eq!(changes.len(), 2);
         assert_eq!(parameters.get("episodes"), Some(&Value::Integer(9)));
-    }
-
-    #[test]
-    fn wire_values_round_trip_and_unset_is_refused() {
-        for value in [
-            Value::Bool(true),
-            Value::Integer(-3),
-            Value::Double(0.25),
-            Value::String("top".into()),
-            Value::DoubleArray(vec![1.0, 2.0]),
-            Value::StringArray(vec!["/a".into()]),
-        ] {
-            assert_eq!(Value::from_message(&value.to_message()), Ok(value));
-        }
-        assert!(Value::from_message(&ValueMessage::default())
-            .unwrap_err()
-            .contains("cannot be undeclared"));
     }
 }

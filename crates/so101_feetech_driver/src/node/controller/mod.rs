@@ -240,6 +240,16 @@ impl<C: Connector> Controller<C> {
         &self.limits
     }
 
+    /// The latest plausible position reading (rad); `None` while the position is unknown.
+    pub fn present_positions(&self) -> Option<JointPositions> {
+        self.present.as_ref().map(|present| present.radians)
+    }
+
+    /// Whether the servos hold torque now.
+    pub fn torque_is_on(&self) -> bool {
+        self.torque.on
+    }
+
     pub fn safety(&self) -> SafetyConfig {
         self.shaper.config()
     }

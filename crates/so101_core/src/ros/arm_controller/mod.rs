@@ -3,27 +3,23 @@
 //! and the action control_msgs/action/FollowJointTrajectory on
 //! `arm_controller/follow_joint_trajectory` (what MoveIt's controller manager sends), shared by
 //! the simulation and the driver. The node polls it once per control period, in its own clock
-//! (sim time or wall time, seconds; header stamps are read in it):
+//! (sim time, or monotonic wall time; header stamps are read in it):
 //! [`ArmController::take_new`], [`ArmController::targets`], then [`ArmController::after_period`].
 //!
 //! One trajectory runs at a time: a newer one (topic or goal) or any direct command preempts it.
-//! Once it has ended its last point stays the target (as joint_trajectory_controller holds it),
-//! until the next trajectory, a direct command or [`ArmController::preempt`].
-//! A goal that cannot be executed is accepted and aborted at once with the reason in its result's
-//! error_string, so the client learns why. A cancel request cancels the running goal.
+//! After a successful end its last point stays the target until the arm is there, for at most
+//! [`HOLD_SECONDS`] (the driver's watchdog would otherwise stop the arm short of it, and a stalled
+//! arm must not be pushed for ever). A goal that cannot run is accepted and aborted at once with
+//! the reason in its result's error_string, so the client learns why.
 
-use std::collections::VecDeque;
+mod goals;
+
 use std::time::{Duration, Instant};
 
 use ros2_client::{
-    action::{
-        ActionServer, ActionServerQosPolicies, GetResultResponse, GoalId, GoalInfo,
-        SendGoalResponse,
-    },
-    action_msgs::{
-        CancelGoalResponse, CancelGoalResponseEnum, GoalStatus, GoalStatusArray, GoalStatusEnum,
-    },
-    RmwRequestId, ServiceMapping, Subscription,
+    action::{ActionServer, ActionServerQosPolicies, GoalInfo, SendGoalResponse},
+    action_msgs::GoalStatusEnum,
+    ServiceMapping, Subscription,
 };
 use so101_msgs::{
     builtin_interfaces::Time,
@@ -42,21 +38,20 @@ use crate::{
     ros::{node::NodeError, qos, rate_limit::RateLimiter, RosNode},
     trajectory::{Follower, PointInput, Progress, Tolerances, Trajectory, TrajectoryError},
 };
+use goals::{GoalBook, GoalRecord};
 
 type Server = ActionServer<Goal, Outcome, Feedback>;
 type AcceptedAt = ros2_client::builtin_interfaces::Time;
 
 /// Seconds of the node's clock between two feedback messages of a goal.
 const FEEDBACK_PERIOD: f64 = 0.05;
-/// Ended goals remembered for late result requests.
-const ENDED_KEPT: usize = 16;
-
-/// A goal and when it was accepted (wall time, in ros2-client's action types).
-#[derive(Debug, Clone, Copy)]
-struct GoalRecord {
-    id: GoalId,
-    accepted: AcceptedAt,
-}
+/// Longest the last point of a finished trajectory is held as the target.
+pub const HOLD_SECONDS: f64 = 2.0;
+/// Distance (rad) at which a held joint counts as arrived.
+const ARRIVED: f64 = 0.005;
+/// Latest start accepted for a stamped trajectory (s from now): a stamp in another clock (wall
+/// time sent to the sim) would otherwise wait for ever.
+const START_HORIZON: f64 = 60.0;
 
 struct Active {
     follower: Follower,
@@ -64,10 +59,10 @@ struct Active {
     next_feedback: f64,
 }
 
-struct Ended {
-    goal: GoalRecord,
-    status: GoalStatusEnum,
-    outcome: Outcome,
+/// The last point of a finished trajectory, held until the arm is there or `until`.
+struct Hold {
+    targets: PartialTargets,
+    until: f64,
 }
 
 /// The topic, the action server and the trajectory being followed.
@@ -75,11 +70,8 @@ pub struct ArmController {
     topic: Subscription<JointTrajectory>,
     action: Server,
     active: Option<Active>,
-    /// The last point of the trajectory that ended, held as the target.
-    hold: Option<PartialTargets>,
-    /// Result requests waiting for their goal to end.
-    waiting: Vec<(RmwRequestId, GoalId)>,
-    ended: VecDeque<Ended>,
+    hold: Option<Hold>,
+    goals: GoalBook<ros2_client::RmwRequestId>,
     warnings: RateLimiter,
     /// Trajectories started, and refused, since the node started (for /diagnostics).
     pub accepted: u64,
@@ -115,46 +107,51 @@ impl ArmController {
             action,
             active: None,
             hold: None,
-            waiting: Vec::new(),
-            ended: VecDeque::new(),
+            goals: GoalBook::default(),
             warnings: RateLimiter::new(Duration::from_secs(1)),
             accepted: 0,
             rejected: 0,
         })
     }
 
-    /// Whether a trajectory is being followed.
-    pub fn is_active(&self) -> bool {
-        self.active.is_some()
+    /// Whether a trajectory runs or its last point is held.
+    pub fn is_busy(&self) -> bool {
+        self.active.is_some() || self.hold.is_some()
     }
 
-    /// Takes the trajectories and goals that arrived: each valid one replaces the running one.
-    /// `now`: the node's clock (s); `actual`: where the arm is (the start of the first segment).
+    /// Takes the trajectories and goals that arrived: each valid one replaces the running one;
+    /// with `refusal` (e.g. torque is off) every one is refused with that reason. `now`: the
+    /// node's clock (s); `actual`: where the arm is (the start of the first segment).
     pub fn take_new(
         &mut self,
         now: f64,
         actual: &JointPositions,
         limits: &[JointLimit; JOINT_COUNT],
+        refusal: Option<&str>,
     ) {
         loop {
             match self.topic.take() {
                 Ok(Some((message, _))) => {
-                    match start(&message, &[], &[], 0.0, now, actual, limits) {
+                    let started = match refusal {
+                        Some(reason) => Err(invalid_goal(reason)),
+                        None => start(&message, &[], &[], 0.0, now, actual, limits),
+                    };
+                    match started {
                         Ok(follower) => self.begin(follower, None, now, "topic"),
-                        Err(refusal) => self.refuse(&refusal.error_string),
+                        Err(refused) => self.refuse(&refused.error_string),
                     }
                 }
                 Ok(None) => break,
                 Err(error) => self.refuse(&format!("undecodable trajectory: {error:?}")),
             }
         }
-        self.take_goals(now, actual, limits);
+        self.take_goals(now, actual, limits, refusal);
         self.serve_cancels();
         self.serve_result_requests();
     }
 
-    /// A direct command (/joint_commands or the array topic), a reset or a torque change ends the
-    /// trajectory, and the hold of the last one.
+    /// A direct command (/joint_commands or the array topic), a reset, a torque change or a
+    /// fault ends the trajectory (a goal is aborted with `why`), and the hold of the last one.
     pub fn preempt(&mut self, why: &str) {
         self.hold = None;
         if let Some(active) = self.active.take() {
@@ -167,14 +164,25 @@ impl ArmController {
 
     /// The targets of the running trajectory at `now`, or the held last point of the one before.
     pub fn targets(&self, now: f64) -> Option<PartialTargets> {
-        match &self.active {
-            Some(active) => active.follower.targets(now),
-            None => self.hold,
+        match (&self.active, &self.hold) {
+            (Some(active), _) => active.follower.targets(now),
+            (None, Some(hold)) => Some(hold.targets),
+            (None, None) => None,
         }
     }
 
-    /// After a control period: the goal's feedback, its tolerances, and its end.
+    /// After a control period: the goal's feedback, its tolerances, and its end; the end of a hold.
     pub fn after_period(&mut self, now: f64, actual: &JointPositions, velocities: &[f64]) {
+        if let Some(hold) = &self.hold {
+            let arrived = (0..JOINT_COUNT).all(|joint| {
+                hold.targets
+                    .get(joint)
+                    .is_none_or(|target| (actual[joint] - target).abs() < ARRIVED)
+            });
+            if arrived || now >= hold.until {
+                self.hold = None;
+            }
+        }
         let Some(active) = self.active.as_mut() else {
             return;
         };
@@ -206,20 +214,19 @@ impl ArmController {
                 message,
             ),
         };
-        let ended = self.active.take();
-        let goal = ended.as_ref().and_then(|active| active.goal);
-        if status == GoalStatusEnum::Succeeded {
-            self.hold = ended.map(|active| {
-                let trajectory = active.follower.trajectory();
-                trajectory.targets(&[0.0; JOINT_COUNT], trajectory.duration())
-            });
-        }
+        let Some(ended) = self.active.take() else {
+            return;
+        };
         if status == GoalStatusEnum::Succeeded {
             tracing::debug!("trajectory done");
+            self.hold = Some(Hold {
+                targets: ended.follower.trajectory().final_targets(),
+                until: now + HOLD_SECONDS,
+            });
         } else {
             tracing::warn!("trajectory aborted: {message}");
         }
-        if let Some(goal) = goal {
+        if let Some(goal) = ended.goal {
             self.end(goal, status, code, &message);
         }
     }
@@ -229,6 +236,7 @@ impl ArmController {
         now: f64,
         actual: &JointPositions,
         limits: &[JointLimit; JOINT_COUNT],
+        refusal: Option<&str>,
     ) {
         loop {
             let (request, goal_request) = match self.action.receive_goal() {
@@ -252,37 +260,39 @@ impl ArmController {
                 continue;
             }
             let goal = goal_request.goal;
-            let tolerance = |entries: &[so101_msgs::control_msgs::JointTolerance]| {
-                entries
-                    .iter()
-                    .map(|entry| (entry.name.clone(), entry.position))
-                    .collect::<Vec<_>>()
-            };
-            let started = if goal.multi_dof_trajectory.joint_names.is_empty() {
+            let started = if let Some(reason) = refusal {
+                Err(invalid_goal(reason))
+            } else if !goal.multi_dof_trajectory.joint_names.is_empty() {
+                Err(Outcome {
+                    error_code: Outcome::INVALID_JOINTS,
+                    error_string: "this arm has no multi-DOF joints".to_owned(),
+                })
+            } else {
+                let positions = |entries: &[so101_msgs::control_msgs::JointTolerance]| {
+                    entries
+                        .iter()
+                        .map(|entry| (entry.name.clone(), entry.position))
+                        .collect::<Vec<_>>()
+                };
                 start(
                     &goal.trajectory,
-                    &tolerance(&goal.path_tolerance),
-                    &tolerance(&goal.goal_tolerance),
+                    &positions(&goal.path_tolerance),
+                    &positions(&goal.goal_tolerance),
                     goal.goal_time_tolerance.as_secs_f64(),
                     now,
                     actual,
                     limits,
                 )
-            } else {
-                Err(Outcome {
-                    error_code: Outcome::INVALID_JOINTS,
-                    error_string: "this arm has no multi-DOF joints".to_owned(),
-                })
             };
             match started {
                 Ok(follower) => self.begin(follower, Some(record), now, "goal"),
-                Err(refusal) => {
-                    self.refuse(&refusal.error_string);
+                Err(refused) => {
+                    self.refuse(&refused.error_string);
                     self.end(
                         record,
                         GoalStatusEnum::Aborted,
-                        refusal.error_code,
-                        &refusal.error_string,
+                        refused.error_code,
+                        &refused.error_string,
                     );
                 }
             }
@@ -290,9 +300,7 @@ impl ArmController {
     }
 
     fn begin(&mut self, follower: Follower, goal: Option<GoalRecord>, now: f64, from: &str) {
-        if self.active.is_some() {
-            self.preempt(&format!("a newer trajectory arrived ({from})"));
-        }
+        self.preempt(&format!("a newer trajectory arrived ({from})"));
         self.accepted += 1;
         tracing::info!(
             from,
@@ -300,6 +308,9 @@ impl ArmController {
             seconds = follower.trajectory().duration(),
             "trajectory started"
         );
+        if let Some(goal) = goal {
+            self.goals.start(goal);
+        }
         self.active = Some(Active {
             follower,
             goal,
@@ -317,118 +328,76 @@ impl ArmController {
 
     /// Ends a goal: its status, its result (to waiting and later result requests).
     fn end(&mut self, goal: GoalRecord, status: GoalStatusEnum, code: i32, message: &str) {
-        let outcome = Outcome {
-            error_code: code,
-            error_string: message.to_owned(),
-        };
-        if self.ended.len() == ENDED_KEPT {
-            self.ended.pop_front();
-        }
-        self.ended.push_back(Ended {
-            goal,
-            status,
-            outcome,
-        });
+        self.goals.end(goal, status, code, message);
         self.publish_statuses();
         self.serve_result_requests();
     }
 
     fn serve_cancels(&mut self) {
-        while let Ok(Some((request, _))) = self.action.receive_cancel_request() {
-            // One goal runs at a time: a cancel request cancels it, whichever goal it names.
-            let goal = self.active.as_ref().and_then(|active| active.goal);
-            let response = match goal {
-                Some(goal) => {
-                    self.active = None;
+        while let Ok(Some((request, cancel))) = self.action.receive_cancel_request() {
+            let Some(goal_info) = cancel_goal_info(&cancel) else {
+                tracing::warn!("cannot read a cancel request");
+                continue;
+            };
+            let (response, cancel_running) = self.goals.cancel(&goal_info);
+            if cancel_running {
+                if let Some(goal) = self.active.take().and_then(|active| active.goal) {
+                    tracing::info!("trajectory goal canceled");
                     self.end(
                         goal,
                         GoalStatusEnum::Canceled,
                         Outcome::SUCCESSFUL,
                         "canceled",
                     );
-                    CancelGoalResponse {
-                        return_code: CancelGoalResponseEnum::None,
-                        goals_canceling: vec![GoalInfo {
-                            goal_id: goal.id,
-                            stamp: goal.accepted,
-                        }],
-                    }
                 }
-                None => CancelGoalResponse {
-                    return_code: CancelGoalResponseEnum::UnknownGoal,
-                    goals_canceling: Vec::new(),
-                },
-            };
+            }
             if let Err(error) = self.action.send_cancel_response(request, response) {
                 tracing::warn!(?error, "cannot answer a cancel request");
             }
         }
     }
 
-    /// Answers the result requests whose goal has ended (at once for an unknown goal).
+    /// Takes the result requests and answers those whose goal has ended (or is unknown).
     fn serve_result_requests(&mut self) {
         while let Ok(Some((request, asked))) = self.action.receive_result_request() {
-            self.waiting.push((request, asked.goal_id));
+            self.goals.ask_result(request, asked.goal_id);
         }
-        let running = self
-            .active
-            .as_ref()
-            .and_then(|active| active.goal)
-            .map(|goal| goal.id);
-        let mut still_waiting = Vec::new();
-        for (request, goal_id) in std::mem::take(&mut self.waiting) {
-            let ended = self.ended.iter().find(|ended| ended.goal.id == goal_id);
-            let response = match ended {
-                Some(ended) => GetResultResponse {
-                    status: ended.status,
-                    result: ended.outcome.clone(),
-                },
-                None if running == Some(goal_id) => {
-                    still_waiting.push((request, goal_id));
-                    continue;
-                }
-                None => GetResultResponse {
-                    status: GoalStatusEnum::Unknown,
-                    result: Outcome::default(),
-                },
-            };
+        for (request, response) in self.goals.answerable() {
             if let Err(error) = self.action.send_result(request, response) {
                 tracing::warn!(?error, "cannot answer a result request");
             }
         }
-        self.waiting = still_waiting;
     }
 
     fn publish_statuses(&mut self) {
-        let mut status_list: Vec<GoalStatus> = self
-            .ended
-            .iter()
-            .map(|ended| status(ended.goal, ended.status))
-            .collect();
-        if let Some(goal) = self.active.as_ref().and_then(|active| active.goal) {
-            status_list.push(status(goal, GoalStatusEnum::Executing));
-        }
-        if let Err(error) = self
-            .action
-            .send_goal_statuses(GoalStatusArray { status_list })
-        {
+        if let Err(error) = self.action.send_goal_statuses(self.goals.statuses()) {
             tracing::debug!(?error, "cannot publish the goal statuses");
         }
     }
 }
 
-fn status(goal: GoalRecord, status: GoalStatusEnum) -> GoalStatus {
-    GoalStatus {
-        goal_info: GoalInfo {
-            goal_id: goal.id,
-            stamp: goal.accepted,
-        },
-        status,
+/// The goal a cancel request names: ros2-client keeps the field private, so it is read back
+/// through its serde form.
+fn cancel_goal_info(request: &ros2_client::action::CancelGoalRequest) -> Option<GoalInfo> {
+    #[derive(serde::Deserialize)]
+    struct Named {
+        goal_info: GoalInfo,
+    }
+    let value = serde_json::to_value(request).ok()?;
+    serde_json::from_value::<Named>(value)
+        .ok()
+        .map(|named| named.goal_info)
+}
+
+fn invalid_goal(reason: &str) -> Outcome {
+    Outcome {
+        error_code: Outcome::INVALID_GOAL,
+        error_string: reason.to_owned(),
     }
 }
 
 /// A follower for `message`, or the result that refuses it. A zero stamp starts it now, a later
-/// one then; one so old that the whole trajectory lies in the past is refused.
+/// one then (at most [`START_HORIZON`] ahead); one whose end lies in the past is refused.
 fn start(
     message: &JointTrajectory,
     path_tolerance: &[(String, f64)],
@@ -473,6 +442,12 @@ fn start(
             ),
         });
     }
+    if started > now + START_HORIZON {
+        return Err(invalid_goal(&format!(
+            "header.stamp {started:.3} s is more than {START_HORIZON} s after now ({now:.3} s; \
+             the node's clock: sim time for the sim, wall time for the driver)"
+        )));
+    }
     Ok(Follower::new(trajectory, started, *actual, tolerances))
 }
 
@@ -489,11 +464,9 @@ fn feedback(
         .iter()
         .map(|&joint| velocities.get(joint).copied().unwrap_or(0.0))
         .collect();
-    let elapsed = so101_msgs::builtin_interfaces::Duration::default();
     let point = |positions: Vec<f64>, velocities: Vec<f64>| JointTrajectoryPoint {
         positions,
         velocities,
-        time_from_start: elapsed,
         ..JointTrajectoryPoint::default()
     };
     let difference = |a: &[f64], b: &[f64]| a.iter().zip(b).map(|(a, b)| a - b).collect();
