@@ -76,7 +76,7 @@ def test_rviz_opens_the_view_with_the_description_package_on_the_ament_path(bina
     monkeypatch.setenv("AMENT_PREFIX_PATH", "/opt/ros/jazzy")
     from so101 import description
 
-    monkeypatch.setattr(description, "install", lambda prefix, urdf=None: description.share_directory(prefix))
+    monkeypatch.setattr(description, "install", lambda prefix: description.share_directory(prefix))
     args = launch.parser().parse_args(["--control", "none", "--rviz", "--log-dir", str(tmp_path / "logs")])
     specs = {spec.name: spec for spec in launch.plan(args)}
     assert "so101_state_publisher" in specs  # --rviz implies --tf

@@ -267,7 +267,7 @@ impl SimLoop {
         let world = self.env.world();
         let limits = *world.limits();
         self.arm
-            .take_new(world.time(), &world.arm_state().position, &limits, None);
+            .take_new(world.time(), &|| world.arm_state().position, &limits, None);
     }
 
     /// Parameters set since the last look take effect now.

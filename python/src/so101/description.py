@@ -37,9 +37,9 @@ def share_directory(prefix: Path) -> Path:
     return prefix / "share" / PACKAGE
 
 
-def install(prefix: Path, urdf: str | None = None) -> Path:
+def install(prefix: Path) -> Path:
     """Writes the package into `prefix` (replacing an earlier install); returns its share
-    directory. `urdf` defaults to so101_state_publisher's, with package:// mesh URIs."""
+    directory. The URDF is so101_state_publisher's, with package:// mesh URIs."""
     share = share_directory(prefix)
     if share.exists():
         shutil.rmtree(share)
@@ -56,13 +56,12 @@ def install(prefix: Path, urdf: str | None = None) -> Path:
         shutil.copy2(mesh, share / "meshes" / mesh.name)
     if meshes.joinpath("LICENSE").is_file():
         shutil.copy2(meshes / "LICENSE", share / "meshes" / "LICENSE")
-    if urdf is None:
-        urdf = subprocess.run(
-            [str(node_binary("so101_state_publisher")), "--print-urdf", "--mesh-uri", "package"],
-            check=True,
-            capture_output=True,
-            text=True,
-        ).stdout
+    urdf = subprocess.run(
+        [str(node_binary("so101_state_publisher")), "--print-urdf", "--mesh-uri", "package"],
+        check=True,
+        capture_output=True,
+        text=True,
+    ).stdout
     (share / "urdf" / "so101.urdf").write_text(urdf)
     shutil.copy2(asset(RVIZ_CONFIG), share / RVIZ_CONFIG)
     return share

@@ -262,7 +262,8 @@ impl Driver {
         } else {
             None
         };
-        let start = present.unwrap_or([0.0; so101_core::robot::JOINT_COUNT]);
+        // With a refusal nothing starts, so the positions are never read then.
+        let start = || present.unwrap_or([0.0; so101_core::robot::JOINT_COUNT]);
         arm.take_new(clock, &start, self.controller.limits(), refusal);
     }
 

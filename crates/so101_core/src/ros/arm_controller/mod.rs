@@ -121,11 +121,12 @@ impl ArmController {
 
     /// Takes the trajectories and goals that arrived: each valid one replaces the running one;
     /// with `refusal` (e.g. torque is off) every one is refused with that reason. `now`: the
-    /// node's clock (s); `actual`: where the arm is (the start of the first segment).
+    /// node's clock (s); `actual`: where the arm is (the start of the first segment), read only
+    /// when a trajectory arrives (this runs on the control loop's hot path).
     pub fn take_new(
         &mut self,
         now: f64,
-        actual: &JointPositions,
+        actual: &dyn Fn() -> JointPositions,
         limits: &[JointLimit; JOINT_COUNT],
         refusal: Option<&str>,
     ) {
@@ -134,7 +135,7 @@ impl ArmController {
                 Ok(Some((message, _))) => {
                     let started = match refusal {
                         Some(reason) => Err(invalid_goal(reason)),
-                        None => start(&message, &[], &[], 0.0, now, actual, limits),
+                        None => start(&message, &[], &[], 0.0, now, &actual(), limits),
                     };
                     match started {
                         Ok(follower) => self.begin(follower, None, now, "topic"),
@@ -234,7 +235,7 @@ impl ArmController {
     fn take_goals(
         &mut self,
         now: f64,
-        actual: &JointPositions,
+        actual: &dyn Fn() -> JointPositions,
         limits: &[JointLimit; JOINT_COUNT],
         refusal: Option<&str>,
     ) {
@@ -280,7 +281,7 @@ impl ArmController {
                     &positions(&goal.goal_tolerance),
                     goal.goal_time_tolerance.as_secs_f64(),
                     now,
-                    actual,
+                    &actual(),
                     limits,
                 )
             };

@@ -79,10 +79,6 @@ impl Declaration {
         &self.value
     }
 
-    pub fn description(&self) -> &str {
-        &self.description
-    }
-
     pub fn read_only(&self) -> bool {
         self.read_only
     }
