@@ -46,6 +46,8 @@ def test_lerobot_train_gets_the_whole_preset_and_extra_arguments_last(recipe, tm
     assert f"--policy.type={recipe}" in command and "--policy.device=cpu" in command
     for key, value in lerobot_train.PRESETS[recipe]["policy"].items():
         assert f"--policy.{key}={value}" in command
+    for key, value in lerobot_train.PRESETS[recipe].get("training", {}).items():
+        assert f"--{key}={value}" in command
     assert "--steps=50" in command and f"--dataset.root={dataset.resolve()}" in command
     assert "--save_freq=50" in command  # never beyond the last step, so `last` exists
     assert any(arg.startswith("--policy.normalization_mapping=") and '"ENV":"MEAN_STD"' in arg for arg in command)

@@ -47,6 +47,37 @@ def test_the_ros_backend_passes_the_checker_and_follows_the_in_process_trajector
         local.close()
 
 
+def test_a_lost_reply_to_the_first_reset_restarts_the_node_with_the_same_seed():
+    """A node just started can run /sim/reset and lose the reply (its reply writer not yet matched
+    to the client): the env restarts the node with the same seed instead of failing the run."""
+    import gymnasium as gym
+
+    ros = gym.make("so101:so101/CubeToBin-v0", backend="ros")
+    local = gym.make("so101/CubeToBin-v0")
+    env = ros.unwrapped
+    real_call, dropped = env._call, []
+
+    def call_losing_the_first_reply(client, what, timeout=None):
+        if not dropped:
+            dropped.append(what)
+            client.call_async(env._trigger())  # the node resets; this reply is never awaited
+            raise TimeoutError(f"no {what} (the reply dropped by the test)")
+        return real_call(client, what, timeout)
+
+    env._call = call_losing_the_first_reply
+    try:
+        ros_observation, _ = ros.reset(seed=5)
+        local_observation, _ = local.reset(seed=5)
+        assert dropped == ["/sim/reset"]
+        assert np.abs(state_of(ros_observation) - state_of(local_observation)).max() <= 1e-9
+        ros_observation, *_ = ros.step(local_observation["agent_pos"])
+        local_observation, *_ = local.step(local_observation["agent_pos"])
+        assert np.abs(state_of(ros_observation) - state_of(local_observation)).max() <= 1e-9
+    finally:
+        ros.close()
+        local.close()
+
+
 def test_with_cameras_each_step_brings_the_frames_of_its_state():
     import gymnasium as gym
 

@@ -13,6 +13,7 @@ seed (the in-process backend restarts nothing).
 
 from __future__ import annotations
 
+import logging
 import os
 import subprocess
 import tempfile
@@ -27,6 +28,15 @@ from .messages import joint_positions, rgb_image
 from .paths import node_binary, node_environment
 from .sim_env import action_space, checked_action, observation_from_state, observation_space
 from .units import JOINT_NAMES
+
+log = logging.getLogger(__name__)
+
+# A node just started can run the first /sim/reset and lose its reply: the service's reply writer
+# may not have matched this client yet (seen on a loaded 2-core machine, about once in 50
+# episodes). Such a reset is retried on a restarted node with the same seed, so the episode is
+# the same one.
+FIRST_RESET_TIMEOUT_S = 5.0
+FIRST_RESET_ATTEMPTS = 3
 
 
 class So101SimEnv(gym.Env):
@@ -93,13 +103,14 @@ class So101SimEnv(gym.Env):
         self._JointState = JointState
 
     # ------------------------------------------------------------------ plumbing
-    def _spin_until(self, predicate, what: str) -> None:
-        deadline = time.monotonic() + self._timeout
+    def _spin_until(self, predicate, what: str, timeout: float | None = None) -> None:
+        timeout = self._timeout if timeout is None else timeout
+        deadline = time.monotonic() + timeout
         while not predicate():
             if self._process is not None and self._process.poll() is not None:
                 raise RuntimeError(f"so101_sim_node exited with {self._process.returncode} (log: {self._log.name})")
             if time.monotonic() > deadline:
-                raise TimeoutError(f"no {what} from so101_sim_node within {self._timeout} s (log: {self._log.name})")
+                raise TimeoutError(f"no {what} from so101_sim_node within {timeout} s (log: {self._log.name})")
             self._executor.spin_once(timeout_sec=0.01)
 
     def _counted_past(self, counts: dict) -> bool:
@@ -125,9 +136,9 @@ class So101SimEnv(gym.Env):
         finally:
             self._awaited = None
 
-    def _call(self, client, what: str):
+    def _call(self, client, what: str, timeout: float | None = None):
         future = client.call_async(self._trigger())
-        self._spin_until(future.done, what)
+        self._spin_until(future.done, what, timeout)
         response = future.result()
         if not response.success:
             raise RuntimeError(f"{what} failed: {response.message}")
@@ -168,6 +179,20 @@ class So101SimEnv(gym.Env):
         while time.monotonic() < settle:
             self._executor.spin_once(timeout_sec=0.01)
 
+    def _restart_and_reset(self, seed: int) -> dict:
+        """Starts the sim with `seed` and resets it; the counters before the reset that answered."""
+        for attempt in range(1, FIRST_RESET_ATTEMPTS + 1):
+            self._start_sim(seed)
+            counts = dict(self._counts)
+            try:
+                self._call(self._reset_client, "/sim/reset", timeout=FIRST_RESET_TIMEOUT_S)
+                return counts
+            except TimeoutError:
+                if attempt == FIRST_RESET_ATTEMPTS:
+                    raise
+                log.warning("no reply to the first /sim/reset of a new sim node (seed %d): restarting it", seed)
+        raise AssertionError("unreachable")
+
     def _stop_sim(self) -> None:
         if self._process is not None:
             process.stop(self._process)
@@ -201,9 +226,10 @@ class So101SimEnv(gym.Env):
         super().reset(seed=seed)
         if seed is not None or self._process is None:
             # A seed restarts the sim with it, so the same seed gives the same episodes.
-            self._start_sim(seed if seed is not None else 0)
-        counts = dict(self._counts)
-        self._call(self._reset_client, "/sim/reset")
+            counts = self._restart_and_reset(seed if seed is not None else 0)
+        else:
+            counts = dict(self._counts)
+            self._call(self._reset_client, "/sim/reset")
         observation = self._observe(counts)
         return observation, {"is_success": bool(self._latest["success"].data)}
 
