@@ -16,6 +16,7 @@ skips them).
 from __future__ import annotations
 
 import os
+import signal
 import sys
 from pathlib import Path
 
@@ -33,6 +34,12 @@ from harness import (  # noqa: E402
     node_binary,
     stop_nodes,
 )
+
+# The tests stop programs as a user at a terminal does, with Ctrl-C. A suite started in the background
+# of a script (`scripts/test.sh &`, nohup) runs with SIGINT ignored, and every program it starts would
+# inherit that (LeRobot's CLIs, which do not catch SIGINT themselves, would then not stop). Catching
+# it here gives them the terminal's default again: exec resets a caught signal, not an ignored one.
+signal.signal(signal.SIGINT, signal.default_int_handler)
 
 # Fast DDS profile (large socket buffers) and RMW for every rclpy participant of the run; set before
 # rclpy creates any context.

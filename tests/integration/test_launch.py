@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import os
 import re
+import shlex
 import signal
 import subprocess
 import sys
@@ -126,3 +127,28 @@ def test_real_profile_on_the_emulator_stops_cleanly_on_sigterm(ros, tmp_path):
     assert all(gone(pid) for pid in pids.values()), "a node outlived the launcher"
     assert (bags / "episode_000000" / "metadata.yaml").is_file(), "the recorder did not close its episode"
     assert "torque off" in (logs / "so101_feetech_driver.log").read_text(), "the driver did not turn torque off"
+
+
+def test_ctrl_c_stops_a_launcher_started_in_the_background_of_a_script(tmp_path):
+    # `so101-launch ... &` in a script starts it with SIGINT ignored (POSIX, for jobs without job
+    # control); `trap "" INT` does the same here. Ctrl-C (kill -INT) must still stop the run.
+    command = shlex.join([str(LAUNCH), "--control", "none", "--lite", "--sim-args", "--cameras none", "--log-dir", str(tmp_path)])
+    launcher = subprocess.Popen(
+        ["sh", "-c", f'trap "" INT; exec {command}'], stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True
+    )
+    output = ""
+    try:
+        output = wait_for_launcher(launcher, 60.0)
+        launcher.send_signal(signal.SIGINT)
+        rest, _ = launcher.communicate(timeout=20)
+        output += rest
+    except subprocess.TimeoutExpired:
+        launcher.kill()
+        output += launcher.communicate()[0]
+        raise AssertionError(f"Ctrl-C did not stop the launcher within 20 s:\n{output}") from None
+    finally:
+        if launcher.poll() is None:
+            launcher.kill()
+    assert launcher.returncode == 0, output
+    assert "so101-launch: stopping" in output and "killed" not in output, output
+    assert all(gone(pid) for pid in started_pids(output).values()), "a node outlived the launcher"

@@ -26,6 +26,7 @@ import numpy as np
 import pytest
 from driver_harness import ServoEmulator
 from harness import REPO_ROOT, TINY_ACT, Probe, SimNode, best_effort_qos, node_binary, stop_nodes, wait_until
+from tool_terminal import signal_state
 
 from so101 import contract
 
@@ -285,7 +286,9 @@ def test_async_inference_drives_the_sim_through_so101_ros(recording, tiny_act, r
                 f"--fps={FPS}",
                 "--task=move the arm",
             ],
-            env=env,
+            # A client that hangs on Ctrl-C gets SIGABRT below: faulthandler writes every thread's
+            # stack to its log, so the failure says where it hung.
+            env={**env, "PYTHONFAULTHANDLER": "1"},
             stdout=logs["client"],
             stderr=subprocess.STDOUT,
         )
@@ -316,13 +319,22 @@ def test_async_inference_drives_the_sim_through_so101_ros(recording, tiny_act, r
                 try:
                     proc.wait(timeout=15)
                 except subprocess.TimeoutExpired:
-                    proc.kill()
-                    proc.wait()
+                    proc_log = logs["client" if proc is client else "server"]
+                    proc_log.write(signal_state(proc.pid))
+                    proc_log.flush()
+                    proc.send_signal(signal.SIGABRT)
+                    try:
+                        proc.wait(timeout=5)
+                    except subprocess.TimeoutExpired:
+                        proc.kill()
+                        proc.wait()
         for handle in logs.values():
             handle.close()
         problems = stop_nodes([sim])
     assert not problems, problems
-    assert client.returncode in (0, -signal.SIGINT), f"robot_client ended with {client.returncode}"
+    assert client.returncode in (0, -signal.SIGINT), (
+        f"robot_client ended with {client.returncode}:\n" + (tmp_path / "client.log").read_text(errors="replace")[-5000:]
+    )
 
 
 def test_the_robot_drives_the_feetech_driver_alike(arm_factory, tmp_path):

@@ -96,6 +96,7 @@ class Desk:
         env.update(
             HOME=str(self.home), CARGO_TARGET_DIR=str(self.bin_dir.parent), SO101_BIN_DIR=str(self.bin_dir), B=str(self.bin_dir)
         )
+        env["PYTHONFAULTHANDLER"] = "1"  # a command that hangs shows its stacks (Terminal.dump_stacks)
         self.env = env
         for port in PORTS:
             link = self.dev / Path(port).name

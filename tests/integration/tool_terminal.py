@@ -61,6 +61,7 @@ class Terminal:
         try:
             code = self.proc.wait(timeout=timeout)
         except subprocess.TimeoutExpired:
+            self.dump_stacks()
             self.kill()
             raise AssertionError(f"{self.argv} did not end within {timeout} s; output:\n{self.text()}") from None
         self._drain(timeout)
@@ -77,6 +78,20 @@ class Terminal:
             os.killpg(self.proc.pid, signal.SIGINT)
         return self.wait(timeout)
 
+    def dump_stacks(self, timeout: float = 3.0) -> None:
+        """SIGABRT to the command alone: a Python program run with PYTHONFAULTHANDLER=1 writes every
+        thread's stack to its output, so a hang says where it hung (the output then has it, after
+        the signal dispositions and masks of its threads)."""
+        if self.proc.poll() is None:
+            with self._lock:
+                self.output += signal_state(self.proc.pid)
+            os.kill(self.proc.pid, signal.SIGABRT)
+            try:
+                self.proc.wait(timeout=timeout)
+            except subprocess.TimeoutExpired:
+                pass
+            self._drain(1.0)
+
     def kill(self) -> None:
         if self.proc.poll() is None:
             try:
@@ -84,3 +99,19 @@ class Terminal:
             except ProcessLookupError:
                 pass
             self.proc.wait()
+
+
+def signal_state(pid: int) -> str:
+    """What /proc says about `pid`'s signals: ignored, caught, and each thread's blocked set
+    (a process that does not react to Ctrl-C shows here whether SIGINT reaches it)."""
+    lines = []
+    try:
+        status = Path(f"/proc/{pid}/status").read_text()
+        lines += [line for line in status.splitlines() if line.startswith(("SigIgn", "SigCgt", "SigPnd", "ShdPnd"))]
+        for task in sorted(Path(f"/proc/{pid}/task").iterdir()):
+            fields = dict(line.split(":", 1) for line in (task / "status").read_text().splitlines() if ":" in line)
+            lines.append(f"thread {task.name} {fields.get('Name', '').strip()}: SigBlk {fields.get('SigBlk', '').strip()}")
+    except OSError as error:
+        lines.append(f"({error})")
+    joined = "\n".join(lines)
+    return f"\n--- signals of pid {pid}:\n{joined}\n"

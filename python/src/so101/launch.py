@@ -490,6 +490,9 @@ def main(argv: list[str] | None = None) -> int:
         raise SystemExit(f"so101-launch: {error}") from error
 
     launch = Launch(log_dir, args.ready_timeout, args.stop_timeout, args.namespace)
+    # Ctrl-C is set explicitly: a launcher started as `so101-launch ... &` from a script inherits
+    # SIGINT ignored, and so would every node it starts, deaf to the SIGINT that stops them.
+    signal.signal(signal.SIGINT, signal.default_int_handler)
     signal.signal(signal.SIGTERM, stop_like_ctrl_c)
     signal.signal(signal.SIGHUP, stop_like_ctrl_c)
     status = 0
