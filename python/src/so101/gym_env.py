@@ -181,7 +181,8 @@ class So101SimEnv(gym.Env):
 
     def _restart_and_reset(self, seed: int) -> dict:
         """Starts the sim with `seed` and resets it; the counters before the reset that answered."""
-        for attempt in range(1, FIRST_RESET_ATTEMPTS + 1):
+        attempt = 1
+        while True:
             self._start_sim(seed)
             counts = dict(self._counts)
             try:
@@ -190,8 +191,8 @@ class So101SimEnv(gym.Env):
             except TimeoutError:
                 if attempt == FIRST_RESET_ATTEMPTS:
                     raise
+                attempt += 1
                 log.warning("no reply to the first /sim/reset of a new sim node (seed %d): restarting it", seed)
-        raise AssertionError("unreachable")
 
     def _stop_sim(self) -> None:
         if self._process is not None:
