@@ -26,7 +26,7 @@ import numpy as np
 import pytest
 from driver_harness import ServoEmulator
 from harness import REPO_ROOT, TINY_ACT, Probe, SimNode, best_effort_qos, node_binary, stop_nodes, wait_until
-from tool_terminal import signal_state
+from tool_terminal import abort_for_stacks
 
 from so101 import contract
 
@@ -257,9 +257,14 @@ def test_async_inference_drives_the_sim_through_so101_ros(recording, tiny_act, r
     )
     commands = ros_probe.subscribe("/async/joint_commands", JointState, best_effort_qos())
     states = ros_probe.subscribe("/async/joint_states", JointState, best_effort_qos())
-    logs = {name: open(tmp_path / f"{name}.log", "w") for name in ("server", "client")}
+    # Line-buffered: what the test writes there itself lands in order with the process's output.
+    logs = {name: open(tmp_path / f"{name}.log", "w", buffering=1) for name in ("server", "client")}
     python = str(BIN / "python")
     server = client = None
+
+    def log(name: str) -> str:
+        return (tmp_path / f"{name}.log").read_text(errors="replace")[-5000:]
+
     try:
         wait_until(lambda: states.count() > 0, 20.0, "the sim's /async/joint_states", sim)
         server = subprocess.Popen(
@@ -293,10 +298,6 @@ def test_async_inference_drives_the_sim_through_so101_ros(recording, tiny_act, r
             stderr=subprocess.STDOUT,
         )
 
-        def log(name: str) -> str:
-            logs[name].flush()
-            return (tmp_path / f"{name}.log").read_text(errors="replace")[-5000:]
-
         def arrived() -> bool:
             assert server.poll() is None, "policy_server died:\n" + log("server")
             assert client.poll() is None, "robot_client died:\n" + log("client")
@@ -319,22 +320,15 @@ def test_async_inference_drives_the_sim_through_so101_ros(recording, tiny_act, r
                 try:
                     proc.wait(timeout=15)
                 except subprocess.TimeoutExpired:
-                    proc_log = logs["client" if proc is client else "server"]
-                    proc_log.write(signal_state(proc.pid))
-                    proc_log.flush()
-                    proc.send_signal(signal.SIGABRT)
-                    try:
-                        proc.wait(timeout=5)
-                    except subprocess.TimeoutExpired:
+                    abort_for_stacks(proc, logs["client" if proc is client else "server"].write, 5.0)
+                    if proc.poll() is None:
                         proc.kill()
                         proc.wait()
         for handle in logs.values():
             handle.close()
         problems = stop_nodes([sim])
     assert not problems, problems
-    assert client.returncode in (0, -signal.SIGINT), (
-        f"robot_client ended with {client.returncode}:\n" + (tmp_path / "client.log").read_text(errors="replace")[-5000:]
-    )
+    assert client.returncode in (0, -signal.SIGINT), f"robot_client ended with {client.returncode}:\n" + log("client")
 
 
 def test_the_robot_drives_the_feetech_driver_alike(arm_factory, tmp_path):

@@ -33,8 +33,7 @@ class Terminal:
 
     def _pump(self) -> None:
         while chunk := self.proc.stdout.read(1):
-            with self._lock:
-                self.output += chunk
+            self._append(chunk)
 
     def text(self) -> str:
         with self._lock:
@@ -79,18 +78,14 @@ class Terminal:
         return self.wait(timeout)
 
     def dump_stacks(self, timeout: float = 3.0) -> None:
-        """SIGABRT to the command alone: a Python program run with PYTHONFAULTHANDLER=1 writes every
-        thread's stack to its output, so a hang says where it hung (the output then has it, after
-        the signal dispositions and masks of its threads)."""
+        """abort_for_stacks on the command alone; the output then has its signal state and stacks."""
         if self.proc.poll() is None:
-            with self._lock:
-                self.output += signal_state(self.proc.pid)
-            os.kill(self.proc.pid, signal.SIGABRT)
-            try:
-                self.proc.wait(timeout=timeout)
-            except subprocess.TimeoutExpired:
-                pass
+            abort_for_stacks(self.proc, self._append, timeout)
             self._drain(1.0)
+
+    def _append(self, text: str) -> None:
+        with self._lock:
+            self.output += text
 
     def kill(self) -> None:
         if self.proc.poll() is None:
@@ -99,6 +94,18 @@ class Terminal:
             except ProcessLookupError:
                 pass
             self.proc.wait()
+
+
+def abort_for_stacks(proc: subprocess.Popen, record, timeout: float) -> None:
+    """For a process that hangs: `record`s its signal state, then sends SIGABRT, on which a Python
+    program run with PYTHONFAULTHANDLER=1 writes every thread's stack to its output, so the failure
+    says where it hung. Waits `timeout` for it to end; the caller kills it if it did not."""
+    record(signal_state(proc.pid))
+    proc.send_signal(signal.SIGABRT)
+    try:
+        proc.wait(timeout=timeout)
+    except subprocess.TimeoutExpired:
+        pass
 
 
 def signal_state(pid: int) -> str:

@@ -13,6 +13,7 @@ seed (the in-process backend restarts nothing).
 
 from __future__ import annotations
 
+import itertools
 import logging
 import os
 import subprocess
@@ -181,8 +182,7 @@ class So101SimEnv(gym.Env):
 
     def _restart_and_reset(self, seed: int) -> dict:
         """Starts the sim with `seed` and resets it; the counters before the reset that answered."""
-        attempt = 1
-        while True:
+        for attempt in itertools.count(1):
             self._start_sim(seed)
             counts = dict(self._counts)
             try:
@@ -191,7 +191,6 @@ class So101SimEnv(gym.Env):
             except TimeoutError:
                 if attempt == FIRST_RESET_ATTEMPTS:
                     raise
-                attempt += 1
                 log.warning("no reply to the first /sim/reset of a new sim node (seed %d): restarting it", seed)
 
     def _stop_sim(self) -> None:
