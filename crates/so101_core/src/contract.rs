@@ -1,11 +1,12 @@
 //! The topic contract's names, relative to a node's namespace (`Names::resolve` makes them
-//! absolute), and the Python module generated from them, [`crate::robot`] and
+//! absolute), and the Python module generated from them, [`crate::robot`], [`crate::task`] and
 //! [`crate::episode_bag`]: the facts the
 //! Rust nodes and the Python package share live here once. `so101_contract --python` writes
 //! python/src/so101/contract.py; a test fails when the committed file differs.
 
 use crate::episode_bag;
 use crate::robot::{JOINT_LIMITS, JOINT_NAMES};
+use crate::task::{TaskKind, CONTROL_RATE_HZ};
 
 /// Topics, relative to the namespace.
 pub mod topics {
@@ -78,7 +79,8 @@ pub const CAMERA_NAMES: [&str; 3] = ["top", "front", "wrist"];
 pub fn python_module() -> String {
     let mut out = String::from(
         "\"\"\"The topic contract's facts, generated from the Rust crate so101_core (contract.rs,\n\
-         robot.rs) by `so101_contract --python`: do not edit; a test fails when they differ.\"\"\"\n\n",
+         robot.rs, task.rs) by `so101_contract --python`: do not edit; a test fails when they differ.\"\"\"\n\n\
+         from typing import NamedTuple\n\n",
     );
     let quoted = |names: &[&str]| {
         names
@@ -94,6 +96,7 @@ pub fn python_module() -> String {
     }
     out += ")\n";
     out += &format!("CAMERA_NAMES = ({})\n\n", quoted(&CAMERA_NAMES));
+    out += &tasks_python();
     out += "# Topics, services and actions, relative to the namespace.\n";
     let constants: &[(&str, &str)] = &[
         ("JOINT_STATES", topics::JOINT_STATES),
@@ -146,6 +149,62 @@ pub fn python_module() -> String {
     out += "\n\ndef camera_topic(name: str, leaf: str = IMAGE_RAW) -> str:\n    \
             \"\"\"`camera/<name>/<leaf>` (leaf: IMAGE_RAW, IMAGE_COMPRESSED, CAMERA_INFO).\"\"\"\n    \
             return f\"{CAMERA_PREFIX}/{name}/{leaf}\"\n";
+    out
+}
+
+/// The tasks' facts (so101_core::task) as a Python table keyed by task name.
+fn tasks_python() -> String {
+    let mut out = format!(
+        "# The control rate of the arm, the dataset and every task (Hz).\n\
+         CONTROL_RATE = {CONTROL_RATE_HZ:?}\n\n\n\
+         class Task(NamedTuple):\n    \
+             \"\"\"A task's facts (so101_core::task::TaskFacts).\"\"\"\n\n    \
+             name: str\n    \
+             gym_id: str  # the in-process Gymnasium environment\n    \
+             description: str  # the task text of a LeRobot dataset's episodes\n    \
+             episode_steps: int  # at control_rate\n    \
+             terminates_on_success: bool\n    \
+             reward_modes: tuple[str, ...]  # the first is the default\n    \
+             control_rate: float\n\n\n\
+         # Every task the simulation core knows, by name, in the order command lines list them.\n\
+         TASKS = {{\n"
+    );
+    for kind in TaskKind::ALL {
+        let facts = kind.facts();
+        let modes: Vec<_> = facts.reward_modes.iter().map(|mode| mode.name()).collect();
+        let modes = match modes.as_slice() {
+            [one] => format!("(\"{one}\",)"),
+            many => format!(
+                "({})",
+                many.iter()
+                    .map(|mode| format!("\"{mode}\""))
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            ),
+        };
+        let terminates = if facts.terminates_on_success {
+            "True"
+        } else {
+            "False"
+        };
+        out += &format!(
+            "    \"{name}\": Task(\n        \
+                 name=\"{name}\",\n        \
+                 gym_id=\"{gym_id}\",\n        \
+                 description=\"{description}\",\n        \
+                 episode_steps={steps},\n        \
+                 terminates_on_success={terminates},\n        \
+                 reward_modes={modes},\n        \
+                 control_rate={rate:?},\n    \
+             ),\n",
+            name = facts.name,
+            gym_id = facts.gym_id,
+            description = facts.description,
+            steps = facts.episode_steps,
+            rate = facts.control_rate_hz,
+        );
+    }
+    out += "}\n\n";
     out
 }
 

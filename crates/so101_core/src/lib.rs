@@ -11,4 +11,5 @@ pub mod kinematics;
 pub mod robot;
 #[cfg(feature = "ros")]
 pub mod ros;
+pub mod task;
 pub mod trajectory;

@@ -1,33 +1,10 @@
-//! Reward and success of the three tasks (the ones the Gymnasium SO-100 environments offered),
+//! Reward and success of the tasks (the ones the Gymnasium SO-100 environments offered),
 //! computed from a few geometric facts about the scene. Pure: the physics side fills in
-//! [`TaskObservation`].
+//! [`TaskObservation`]. The tasks' facts (names, ids, episode lengths) are so101_core::task's.
 
 use nalgebra::{Matrix3, Vector3};
 
-/// Which task the episode scores.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
-pub enum TaskKind {
-    /// Dense: reward is minus the distance from the gripper tip to the cube.
-    #[value(name = "touch_cube", alias = "touch-cube")]
-    TouchCube,
-    /// Sparse: reward 1 while the gripper touches the cube.
-    #[value(name = "touch_cube_sparse", alias = "touch-cube-sparse")]
-    TouchCubeSparse,
-    /// Sparse: reward 1 once the cube lies in the bin (optional dense shaping).
-    #[value(name = "cube_to_bin", alias = "cube-to-bin")]
-    CubeToBin,
-}
-
-impl std::str::FromStr for TaskKind {
-    type Err = String;
-
-    /// The task's name as on the command line ("cube_to_bin", "touch_cube", "touch_cube_sparse").
-    fn from_str(name: &str) -> Result<Self, String> {
-        <Self as clap::ValueEnum>::from_str(name, false).map_err(|_| {
-            format!("unknown task {name:?}: cube_to_bin, touch_cube or touch_cube_sparse")
-        })
-    }
-}
+pub use so101_core::task::TaskKind;
 
 /// Tip-to-cube-centre distance under which the gripper counts as touching the cube (m): half the
 /// 3 cm cube plus 1.5 cm for the finger pads.

@@ -1,5 +1,7 @@
 """The topic contract's facts, generated from the Rust crate so101_core (contract.rs,
-robot.rs) by `so101_contract --python`: do not edit; a test fails when they differ."""
+robot.rs, task.rs) by `so101_contract --python`: do not edit; a test fails when they differ."""
+
+from typing import NamedTuple
 
 JOINT_NAMES = ("shoulder_pan", "shoulder_lift", "elbow_flex", "wrist_flex", "wrist_roll", "gripper")
 # (min, max) in rad, in JOINT_NAMES order.
@@ -12,6 +14,53 @@ JOINT_LIMITS = (
     (-0.1745, 1.7453),
 )
 CAMERA_NAMES = ("top", "front", "wrist")
+
+# The control rate of the arm, the dataset and every task (Hz).
+CONTROL_RATE = 30.0
+
+
+class Task(NamedTuple):
+    """A task's facts (so101_core::task::TaskFacts)."""
+
+    name: str
+    gym_id: str  # the in-process Gymnasium environment
+    description: str  # the task text of a LeRobot dataset's episodes
+    episode_steps: int  # at control_rate
+    terminates_on_success: bool
+    reward_modes: tuple[str, ...]  # the first is the default
+    control_rate: float
+
+
+# Every task the simulation core knows, by name, in the order command lines list them.
+TASKS = {
+    "cube_to_bin": Task(
+        name="cube_to_bin",
+        gym_id="so101/CubeToBin-v0",
+        description="put the cube in the bin",
+        episode_steps=600,
+        terminates_on_success=True,
+        reward_modes=("sparse", "dense"),
+        control_rate=30.0,
+    ),
+    "touch_cube": Task(
+        name="touch_cube",
+        gym_id="so101/TouchCube-v0",
+        description="touch the cube",
+        episode_steps=300,
+        terminates_on_success=False,
+        reward_modes=("dense",),
+        control_rate=30.0,
+    ),
+    "touch_cube_sparse": Task(
+        name="touch_cube_sparse",
+        gym_id="so101/TouchCubeSparse-v0",
+        description="touch the cube",
+        episode_steps=300,
+        terminates_on_success=False,
+        reward_modes=("sparse",),
+        control_rate=30.0,
+    ),
+}
 
 # Topics, services and actions, relative to the namespace.
 JOINT_STATES = "joint_states"
