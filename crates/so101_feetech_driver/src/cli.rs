@@ -1,13 +1,17 @@
-//! Command-line interface of the so101_feetech_driver binary: the driver node (default) and the
-//! set-up tools `calibrate`, `setup-motors` and `scan`.
+//! Command-line interface of the so101_feetech_driver binary: the driver node (default, its
+//! options here) and the set-up tools `calibrate`, `setup-motors`, `scan`, `find-port` and
+//! `install-udev` (each tool's options live with the tool, the shared ones in `args`).
 
 use std::{path::PathBuf, time::Duration};
 
 use so101_core::ros::NodeArgs;
 
 use crate::{
-    bus::BusConfig,
-    calibration::{lerobot_calibration_dir, lerobot_calibration_path, ArmRole},
+    args::{parse_positive, CalibrationArgs, PortArgs},
+    tools::{
+        calibrate::CalibrateArgs, find_port::FindPortArgs, scan::ScanArgs,
+        setup_motors::SetupMotorsArgs, udev::InstallUdevArgs,
+    },
 };
 
 /// The physical SO-101 over its Feetech STS3215 servo bus, behind the same ROS 2 topics as the
@@ -37,66 +41,6 @@ pub enum Command {
     /// Print or install a udev rule: /dev/so101_follower and /dev/so101_leader by the adapters'
     /// USB serial numbers, access for the dialout group, FTDI latency timer at 1 ms.
     InstallUdev(InstallUdevArgs),
-}
-
-/// Where the bus is.
-#[derive(Debug, Clone, clap::Args)]
-pub struct PortArgs {
-    /// Serial port of the servo bus adapter (or the emulator's pty / symlink).
-    #[arg(long, default_value = "/dev/ttyACM0")]
-    pub port: PathBuf,
-    /// Baud rate of the bus (one the STS3215 supports).
-    #[arg(long, default_value_t = 1_000_000, value_parser = parse_baud)]
-    pub baud: u32,
-    /// Extra attempts after a transaction got no valid answer (0 to 10).
-    #[arg(long, default_value_t = 2, value_parser = clap::value_parser!(u32).range(0..=10))]
-    pub retries: u32,
-    /// Milliseconds allowed for the adapter and the OS on top of the wire time of a transaction.
-    #[arg(long, default_value_t = 10.0, value_parser = parse_positive_ms)]
-    pub bus_slack_ms: f64,
-}
-
-impl PortArgs {
-    pub fn bus_config(&self) -> BusConfig {
-        BusConfig {
-            baud: self.baud,
-            retries: self.retries,
-            slack: Duration::from_secs_f64(self.bus_slack_ms / 1000.0),
-            ..BusConfig::default()
-        }
-    }
-}
-
-/// Which calibration file.
-#[derive(Debug, Clone, clap::Args)]
-pub struct CalibrationArgs {
-    /// Robot id as in LeRobot's --robot.id: names the calibration file in LeRobot's calibration
-    /// directory ($HF_LEROBOT_CALIBRATION or ~/.cache/huggingface/lerobot/calibration).
-    #[arg(long, default_value = "so101")]
-    pub robot_id: String,
-    /// Calibration file to use instead of LeRobot's location.
-    #[arg(long)]
-    pub calibration: Option<PathBuf>,
-    /// A leader arm (teleoperators/so_leader/ in LeRobot's layout; torque stays off).
-    #[arg(long)]
-    pub leader: bool,
-}
-
-impl CalibrationArgs {
-    pub fn role(&self) -> ArmRole {
-        if self.leader {
-            ArmRole::Leader
-        } else {
-            ArmRole::Follower
-        }
-    }
-
-    pub fn path(&self) -> PathBuf {
-        self.calibration.clone().unwrap_or_else(|| {
-            let base = lerobot_calibration_dir(|name| std::env::var(name).ok());
-            lerobot_calibration_path(&base, self.role(), &self.robot_id)
-        })
-    }
 }
 
 /// Options of the driver node.
@@ -152,38 +96,6 @@ pub struct RunArgs {
     pub node: NodeArgs,
 }
 
-#[derive(Debug, Clone, clap::Args)]
-pub struct CalibrateArgs {
-    #[command(flatten)]
-    pub port: PortArgs,
-    #[command(flatten)]
-    pub calibration: CalibrationArgs,
-}
-
-#[derive(Debug, Clone, clap::Args)]
-pub struct SetupMotorsArgs {
-    #[command(flatten)]
-    pub port: PortArgs,
-    /// Set up only these joints (default: all, gripper first like LeRobot).
-    #[arg(long, value_delimiter = ',')]
-    pub joints: Vec<String>,
-}
-
-#[derive(Debug, Clone, clap::Args)]
-pub struct ScanArgs {
-    #[command(flatten)]
-    pub port: PortArgs,
-    /// Try every baud rate the servos support, not only --baud.
-    #[arg(long)]
-    pub all_bauds: bool,
-    /// Highest id to ping.
-    #[arg(long, default_value_t = 252)]
-    pub max_id: u8,
-    /// Print the result as JSON.
-    #[arg(long)]
-    pub json: bool,
-}
-
 /// How often the control loop runs.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub enum CycleRate {
@@ -212,16 +124,6 @@ fn parse_rate(text: &str) -> Result<CycleRate, String> {
     }
 }
 
-fn parse_baud(text: &str) -> Result<u32, String> {
-    let rates = crate::tools::scan::BAUD_RATES.map(|(_, baud)| baud);
-    match text.parse::<u32>() {
-        Ok(baud) if rates.contains(&baud) => Ok(baud),
-        _ => Err(format!(
-            "{text:?} is not a baud rate both LeRobot and Feetech give the STS3215 ({rates:?})"
-        )),
-    }
-}
-
 /// Largest --max-step: 0.5 rad (~29 degrees) a cycle is already far beyond any servo's speed.
 pub const MAX_STEP_CEILING: f64 = 0.5;
 
@@ -237,13 +139,6 @@ fn parse_max_step(text: &str) -> Result<f64, String> {
     })
 }
 
-fn parse_positive(text: &str) -> Result<f64, String> {
-    match text.parse::<f64>() {
-        Ok(value) if value.is_finite() && value > 0.0 => Ok(value),
-        _ => Err(format!("{text:?} is not a number above 0")),
-    }
-}
-
 fn parse_non_negative(text: &str) -> Result<f64, String> {
     match text.parse::<f64>() {
         Ok(value) if value.is_finite() && (0.0..=1e9).contains(&value) => Ok(value),
@@ -251,12 +146,15 @@ fn parse_non_negative(text: &str) -> Result<f64, String> {
     }
 }
 
+/// Longest --command-timeout, s: an hour.
+pub const MAX_COMMAND_TIMEOUT: f64 = 3600.0;
+
 /// A timeout of the node: 0 to an hour.
 fn parse_seconds(text: &str) -> Result<f64, String> {
     match text.parse::<f64>() {
-        Ok(value) if value.is_finite() && (0.0..=3600.0).contains(&value) => Ok(value),
+        Ok(value) if (0.0..=MAX_COMMAND_TIMEOUT).contains(&value) => Ok(value),
         _ => Err(format!(
-            "{text:?} is not a number of seconds from 0 to 3600"
+            "{text:?} is not a number of seconds from 0 to {MAX_COMMAND_TIMEOUT}"
         )),
     }
 }
@@ -277,41 +175,4 @@ fn parse_telemetry_rate(text: &str) -> Result<f64, String> {
         Ok(value) if value.is_finite() && (0.01..=1000.0).contains(&value) => Ok(value),
         _ => Err(format!("{text:?} is not a rate from 0.01 to 1000 Hz")),
     }
-}
-
-fn parse_positive_ms(text: &str) -> Result<f64, String> {
-    parse_positive(text).and_then(|ms| {
-        if ms <= 10_000.0 {
-            Ok(ms)
-        } else {
-            Err(format!("{text:?} ms is more than 10 s"))
-        }
-    })
-}
-
-#[derive(Debug, Clone, clap::Args)]
-pub struct FindPortArgs {
-    /// Where to look for ports, a path with shell wildcards (repeatable;
-    /// default: /dev/ttyACM*, /dev/ttyUSB*, /dev/serial/by-id/*).
-    #[arg(long, value_name = "PATTERN")]
-    pub dev_glob: Vec<String>,
-}
-
-#[derive(Debug, Clone, clap::Args)]
-pub struct InstallUdevArgs {
-    /// USB serial number of the follower arm's adapter (ATTRS{serial}; find-port prints it).
-    #[arg(long, value_name = "SERIAL")]
-    pub follower_serial: String,
-    /// USB serial number of the leader arm's adapter.
-    #[arg(long, value_name = "SERIAL")]
-    pub leader_serial: Option<String>,
-    /// Print the rules (the default).
-    #[arg(long, conflicts_with = "install")]
-    pub print: bool,
-    /// Write the rules to --rules-dir/99-so101.rules (needs root for /etc).
-    #[arg(long)]
-    pub install: bool,
-    /// Directory of the installed rules.
-    #[arg(long, default_value = crate::tools::udev::DEFAULT_RULES_DIR, requires = "install")]
-    pub rules_dir: PathBuf,
 }

@@ -16,11 +16,11 @@ use so101_feetech_driver::{
     arm::{ArmSettings, CalibrationWrite},
     bus::BusConfig,
     calibration::{ArmCalibration, ArmRole},
-    emulator::{BusEmulator, InProcessBus, Timing},
     node::controller::{Controller, ControllerConfig},
     protocol::{registers as reg, ServoErrors},
     safety::SafetyConfig,
 };
+use so101_servo_emulator::{BusEmulator, InProcessBus, Timing};
 
 /// 0.05 rad in ticks (4095 ticks per turn): the step every goal is audited against.
 const MAX_STEP: f64 = 0.05;

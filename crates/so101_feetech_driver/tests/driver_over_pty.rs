@@ -17,7 +17,6 @@ use so101_feetech_driver::{
     arm::{open_bus, Arm, ArmSettings, CalibrationWrite},
     bus::{BusConfig, BusError},
     calibration::{ArmCalibration, ArmRole},
-    emulator::{Emulator, EmulatorConfig, SlotSnapshot, Timing},
     protocol::registers,
     tools::{
         calibrate::{CalibrateError, Calibration},
@@ -25,6 +24,7 @@ use so101_feetech_driver::{
         setup_motors::{assign, SetupError},
     },
 };
+use so101_servo_emulator::{Emulator, EmulatorConfig, SlotSnapshot, Timing};
 
 struct Bench {
     emulator: Emulator,

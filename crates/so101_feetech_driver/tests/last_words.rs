@@ -12,7 +12,6 @@ use so101_feetech_driver::{
     arm::{ArmSettings, CalibrationWrite},
     bus::BusConfig,
     calibration::ArmRole,
-    emulator::{BusEmulator, InProcessBus, Timing},
     node::{
         controller::{Controller, ControllerConfig},
         emergency,
@@ -20,6 +19,7 @@ use so101_feetech_driver::{
     protocol::registers as reg,
     safety::SafetyConfig,
 };
+use so101_servo_emulator::{BusEmulator, InProcessBus, Timing};
 
 #[test]
 fn a_panic_broadcasts_torque_off_to_every_servo() {

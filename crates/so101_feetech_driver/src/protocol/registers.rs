@@ -141,6 +141,23 @@ pub const TICKS_PER_REVOLUTION: u32 = 4096;
 /// Addresses below this are EPROM (kept across power cycles, written only with Lock = 0).
 pub const EPROM_END: u8 = 40;
 
+/// Baud rates by Baud_Rate register index (indices 0-4 agree between LeRobot and Feetech).
+pub const BAUD_RATES: [(i32, u32); 5] = [
+    (0, 1_000_000),
+    (1, 500_000),
+    (2, 250_000),
+    (3, 128_000),
+    (4, 115_200),
+];
+
+/// The Baud_Rate register index of `baud`.
+pub fn baud_index(baud: u32) -> Option<i32> {
+    BAUD_RATES
+        .iter()
+        .find(|(_, rate)| *rate == baud)
+        .map(|(index, _)| *index)
+}
+
 #[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
 pub enum RegisterError {
     #[error("{value} does not fit register {name} ({size} bytes{})", if *signed { ", sign-magnitude" } else { "" })]
@@ -268,5 +285,12 @@ mod tests {
             );
         }
         assert!(HOMING_OFFSET.is_eprom() && !TORQUE_ENABLE.is_eprom());
+    }
+
+    #[test]
+    fn baud_indices_follow_the_servo_table() {
+        assert_eq!(baud_index(1_000_000), Some(0));
+        assert_eq!(baud_index(115_200), Some(4));
+        assert_eq!(baud_index(9600), None);
     }
 }

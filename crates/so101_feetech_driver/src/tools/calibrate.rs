@@ -13,12 +13,20 @@ use anyhow::{Context, Result};
 use so101_core::robot::{JOINT_COUNT, JOINT_NAMES};
 
 use crate::{
+    args::{CalibrationArgs, PortArgs},
     arm::{open_bus, write_motor_calibration},
     bus::{BusError, ServoBus},
     calibration::{validate_motor, ArmCalibration, MotorCalibration, MAX_HOMING_OFFSET, MAX_TICKS},
-    cli::CalibrateArgs,
     protocol::registers,
 };
+
+#[derive(Debug, Clone, clap::Args)]
+pub struct CalibrateArgs {
+    #[command(flatten)]
+    pub port: PortArgs,
+    #[command(flatten)]
+    pub calibration: CalibrationArgs,
+}
 
 /// Tick value of the centred pose (half a turn).
 const HALF_TURN: i32 = 2047;

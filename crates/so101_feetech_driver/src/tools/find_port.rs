@@ -15,14 +15,20 @@ use std::{
 
 use anyhow::{bail, Context, Result};
 
-use crate::cli::FindPortArgs;
-
 /// Where serial adapters appear on Linux: CDC-ACM (CH343, the SO-101 boards' usual chip), USB
 /// serial (CH340, FTDI, CP210x) and udev's stable links.
 pub const DEFAULT_GLOBS: [&str; 3] = ["/dev/ttyACM*", "/dev/ttyUSB*", "/dev/serial/by-id/*"];
 
 /// How long the second listing waits for the kernel to remove the device after Enter.
 const SETTLE: Duration = Duration::from_secs(1);
+
+#[derive(Debug, Clone, clap::Args)]
+pub struct FindPortArgs {
+    /// Where to look for ports, a path with shell wildcards (repeatable;
+    /// default: /dev/ttyACM*, /dev/ttyUSB*, /dev/serial/by-id/*).
+    #[arg(long, value_name = "PATTERN")]
+    pub dev_glob: Vec<String>,
+}
 
 /// One port name present at a listing, with the device it resolved to then (symlinks followed).
 #[derive(Debug, Clone, PartialEq, Eq, PartialOrd, Ord)]

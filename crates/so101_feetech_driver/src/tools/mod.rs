@@ -1,7 +1,8 @@
 //! Set-up tools of the binary: calibration, motor ids and baud, bus scan, finding the adapter's
-//! port, the udev rule. Each keeps its
-//! procedure (talking to the bus) apart from the terminal prompts, so tests drive the procedure
-//! against the emulator.
+//! port, the udev rule. Each tool's command-line options (`*Args`) live with it, the ones it shares
+//! with the node in `args`; `cli` composes them. Each keeps its procedure (talking to the bus)
+//! apart from the terminal prompts, so tests drive the procedure against the emulator
+//! (so101_servo_emulator, in tests/).
 
 pub mod calibrate;
 pub mod find_port;

@@ -6,26 +6,25 @@ use std::time::Duration;
 use anyhow::Result;
 
 use crate::{
+    args::PortArgs,
     arm::{identify, open_bus, ServoInfo},
     bus::{BusConfig, BusError, ServoBus},
-    cli::ScanArgs,
+    protocol::registers::BAUD_RATES,
 };
 
-/// Baud rates by Baud_Rate register index (indices 0-4 agree between LeRobot and Feetech).
-pub const BAUD_RATES: [(i32, u32); 5] = [
-    (0, 1_000_000),
-    (1, 500_000),
-    (2, 250_000),
-    (3, 128_000),
-    (4, 115_200),
-];
-
-/// The Baud_Rate register index of `baud`.
-pub fn baud_index(baud: u32) -> Option<i32> {
-    BAUD_RATES
-        .iter()
-        .find(|(_, rate)| *rate == baud)
-        .map(|(index, _)| *index)
+#[derive(Debug, Clone, clap::Args)]
+pub struct ScanArgs {
+    #[command(flatten)]
+    pub port: PortArgs,
+    /// Try every baud rate the servos support, not only --baud.
+    #[arg(long)]
+    pub all_bauds: bool,
+    /// Highest id to ping.
+    #[arg(long, default_value_t = 252)]
+    pub max_id: u8,
+    /// Print the result as JSON.
+    #[arg(long)]
+    pub json: bool,
 }
 
 #[derive(Debug, Clone, serde::Serialize)]
@@ -113,16 +112,4 @@ pub fn run(args: &ScanArgs) -> Result<()> {
         }
     }
     Ok(())
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn baud_indices_follow_the_servo_table() {
-        assert_eq!(baud_index(1_000_000), Some(0));
-        assert_eq!(baud_index(115_200), Some(4));
-        assert_eq!(baud_index(9600), None);
-    }
 }

@@ -7,13 +7,25 @@ use std::path::Path;
 use anyhow::{bail, Context, Result};
 use so101_core::robot::{joint_index, JOINT_NAMES};
 
-use super::scan::{baud_index, find_servos, probe_config, BAUD_RATES};
+use super::scan::{find_servos, probe_config};
 use crate::{
+    args::PortArgs,
     arm::{open_bus, ArmError},
     bus::{BusConfig, BusError, ServoBus},
-    cli::SetupMotorsArgs,
-    protocol::{registers, MAX_ID},
+    protocol::{
+        registers::{self, baud_index, BAUD_RATES},
+        MAX_ID,
+    },
 };
+
+#[derive(Debug, Clone, clap::Args)]
+pub struct SetupMotorsArgs {
+    #[command(flatten)]
+    pub port: PortArgs,
+    /// Set up only these joints (default: all, gripper first like LeRobot).
+    #[arg(long, value_delimiter = ',')]
+    pub joints: Vec<String>,
+}
 
 #[derive(Debug, thiserror::Error)]
 pub enum SetupError {

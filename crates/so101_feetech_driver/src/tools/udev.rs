@@ -10,8 +10,6 @@ use std::{
 
 use anyhow::{bail, Context, Result};
 
-use crate::cli::InstallUdevArgs;
-
 /// The file the rules go to (late, so the names and modes here win).
 pub const RULES_FILE: &str = "99-so101.rules";
 /// Where udev reads local rules.
@@ -20,6 +18,25 @@ pub const FOLLOWER_NAME: &str = "so101_follower";
 pub const LEADER_NAME: &str = "so101_leader";
 /// Longest serial number accepted (USB string descriptors are at most 126 characters).
 const MAX_SERIAL_LEN: usize = 126;
+
+#[derive(Debug, Clone, clap::Args)]
+pub struct InstallUdevArgs {
+    /// USB serial number of the follower arm's adapter (ATTRS{serial}; find-port prints it).
+    #[arg(long, value_name = "SERIAL")]
+    pub follower_serial: String,
+    /// USB serial number of the leader arm's adapter.
+    #[arg(long, value_name = "SERIAL")]
+    pub leader_serial: Option<String>,
+    /// Print the rules (the default).
+    #[arg(long, conflicts_with = "install")]
+    pub print: bool,
+    /// Write the rules to --rules-dir/99-so101.rules (needs root for /etc).
+    #[arg(long)]
+    pub install: bool,
+    /// Directory of the installed rules.
+    #[arg(long, default_value = DEFAULT_RULES_DIR, requires = "install")]
+    pub rules_dir: PathBuf,
+}
 
 #[derive(Debug, PartialEq, Eq, thiserror::Error)]
 pub enum SerialError {

@@ -12,13 +12,11 @@ use nix::{
     fcntl::OFlag,
     poll::{poll, PollFd, PollFlags, PollTimeout},
 };
-use so101_feetech_driver::{
-    emulator::{Emulator, EmulatorConfig, Timing},
-    protocol::{
-        decode_status, encode_instruction, registers as reg, FrameError, Instruction, PacketReader,
-        StatusPacket, BROADCAST_ID,
-    },
+use so101_feetech_driver::protocol::{
+    decode_status, encode_instruction, registers as reg, FrameError, Instruction, PacketReader,
+    StatusPacket, BROADCAST_ID,
 };
+use so101_servo_emulator::{Emulator, EmulatorConfig, Timing};
 
 const PATIENCE: Duration = Duration::from_millis(500);
 

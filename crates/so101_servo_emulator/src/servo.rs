@@ -23,7 +23,7 @@
 
 use std::time::Duration;
 
-use crate::{
+use so101_feetech_driver::{
     calibration::MotorCalibration,
     protocol::{
         registers::{self as reg, Register, RegisterError, EPROM_END, STS3215_MODEL},

@@ -17,14 +17,15 @@ use serde::{Deserialize, Serialize};
 
 use so101_core::robot::JOINT_NAMES;
 
-use super::{servo::ServoModel, EmulatorError};
-use crate::{
+use so101_feetech_driver::{
     calibration::ArmCalibration,
     protocol::{
         decode_instruction, encode_status, registers as reg, timing, Instruction, ServoErrors,
         StatusPacket, BROADCAST_ID, MAX_PACKET_LEN,
     },
 };
+
+use crate::{servo::ServoModel, EmulatorError};
 
 /// Status packet bytes that are not data: header, id, length, error, checksum.
 const STATUS_FRAMING: usize = 6;
@@ -488,7 +489,7 @@ fn read_what_fits(servo: &ServoModel, address: u8, length: u8) -> Vec<u8> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::protocol::{decode_status, encode_instruction, PacketReader};
+    use so101_feetech_driver::protocol::{decode_status, encode_instruction, PacketReader};
 
     fn bus(timing: Timing) -> BusEmulator {
         BusEmulator::with_factory_servos(&[1, 2, 3, 4, 5, 6], timing, 7)
@@ -721,7 +722,7 @@ mod tests {
     #[test]
     fn a_calibrated_arm_has_the_files_ids_in_joint_order() {
         let calibration = ArmCalibration::from_json(
-            include_str!("../../../../assets/emulated_arm/so101_calibration.json"),
+            include_str!("../../../assets/emulated_arm/so101_calibration.json"),
             Path::new("so101_calibration.json"),
         )
         .unwrap();

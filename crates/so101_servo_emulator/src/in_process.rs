@@ -11,14 +11,15 @@ use std::{
     time::{Duration, Instant},
 };
 
-use super::bus::BusEmulator;
-use crate::{
+use so101_feetech_driver::{
     bus::{Connector, Transport},
     protocol::{
         decode_instruction, encode_status, registers as reg, Instruction, PacketReader,
         StatusPacket,
     },
 };
+
+use crate::bus::BusEmulator;
 
 /// Largest distance between a goal and the servo's position when it was written, over all goal
 /// writes to servos with torque on.
@@ -340,10 +341,9 @@ impl Write for InProcessTransport {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::{
-        bus::{BusConfig, ServoBus},
-        emulator::Timing,
-    };
+    use so101_feetech_driver::bus::{BusConfig, ServoBus};
+
+    use crate::Timing;
 
     fn servos() -> InProcessBus {
         InProcessBus::new(BusEmulator::with_factory_servos(

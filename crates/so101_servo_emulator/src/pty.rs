@@ -22,15 +22,16 @@ use nix::{
 };
 use serde::Serialize;
 
-use super::{
+use so101_feetech_driver::{
+    calibration::ArmCalibration,
+    protocol::{registers as reg, PacketReader},
+};
+
+use crate::{
     bus::{calibrated_servos, BusEmulator, SlotSnapshot, SlotState, Timing},
     control::ControlCommand,
     servo::{ServoModel, DEFAULT_TAU},
     EmulatorError,
-};
-use crate::{
-    calibration::ArmCalibration,
-    protocol::{registers as reg, PacketReader},
 };
 
 /// How long one poll of the master waits, so stop and hangup requests are seen promptly.

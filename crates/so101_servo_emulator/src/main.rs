@@ -16,10 +16,8 @@ use std::{
 use anyhow::{bail, Context};
 use clap::{Parser, ValueEnum};
 use so101_core::ros::{logging, shutdown::Shutdown};
-use so101_feetech_driver::{
-    calibration::ArmCalibration,
-    emulator::{ControlCommand, Emulator, EmulatorConfig, Timing},
-};
+use so101_feetech_driver::calibration::ArmCalibration;
+use so101_servo_emulator::{ControlCommand, Emulator, EmulatorConfig, Timing};
 
 const CONTROL_HELP: &str = "Control commands on stdin, one per line:
   move ID TICKS        set a servo's shaft (absolute ticks), as a hand does with torque off

@@ -17,7 +17,7 @@
 
 use std::{str::FromStr, time::Duration};
 
-use super::bus::{BusEmulator, Faults};
+use crate::bus::{BusEmulator, Faults};
 
 const USAGE_MOVE: &str = "move ID TICKS";
 const USAGE_SILENT: &str = "silent ID on|off";
@@ -289,7 +289,7 @@ fn parse_bits(word: &str) -> Result<u8, ControlError> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::emulator::bus::Timing;
+    use crate::bus::Timing;
 
     fn parse(line: &str) -> Result<ControlCommand, ControlError> {
         line.parse()
