@@ -2,7 +2,7 @@
 //! (topics, all, regex, exclude), which may change while it records: newly wanted topics are
 //! subscribed at the next discovery (within a second), topics no longer wanted stop being written.
 
-use so101_core::ros::parameters::{Declaration, Parameters, Value};
+use so101_core::ros::parameters::{Options, Parameters, Value};
 
 use crate::{
     cli::Args,
@@ -67,88 +67,49 @@ fn valid_patterns(value: &Value) -> Result<(), String> {
 
 /// The node's parameters for `args`.
 pub fn declarations(args: &Args) -> Parameters {
+    let options = Options::of::<Args>();
     let text = |value: &dyn std::fmt::Display| Value::String(value.to_string());
     let optional = |value: Option<f64>| Value::Double(value.unwrap_or(0.0));
+    const SELECTION_EFFECT: &str = "Applies from the next discovery.";
     Parameters::new([
-        Declaration::new(
-            "output",
-            text(&args.output.display()),
-            "Directory of the episode bags.",
-        ),
-        Declaration::new(
-            "topics",
-            Value::StringArray(args.topics.clone()),
-            "Topics recorded by name (relative names are in the namespace); with regex and all \
-             empty, none means the default set. Applies from the next discovery.",
-        )
-        .dynamic(),
-        Declaration::new(
-            "all",
-            Value::Bool(args.all),
-            "Every topic whose type the recorder knows. Applies from the next discovery.",
-        )
-        .dynamic(),
-        Declaration::new(
-            "regex",
-            Value::StringArray(args.patterns.clone()),
-            "Topics whose whole name matches one of these regular expressions. Applies from the \
-             next discovery.",
-        )
-        .dynamic()
-        .check("valid regular expressions", valid_patterns),
-        Declaration::new(
-            "exclude",
-            Value::String(args.exclude.clone().unwrap_or_default()),
-            "Topics whose whole name matches this regular expression are left out (empty: none). \
-             Applies from the next discovery.",
-        )
-        .dynamic()
-        .check("a valid regular expression", valid_patterns),
-        Declaration::new(
-            "compression",
-            Value::choice(&args.compression),
-            "MCAP chunk compression.",
-        ),
-        Declaration::new(
+        options.declare("output", text(&args.output.display())),
+        options
+            .declare("topics", Value::StringArray(args.topics.clone()))
+            .dynamic()
+            .effect(SELECTION_EFFECT),
+        options
+            .declare("all", Value::Bool(args.all))
+            .dynamic()
+            .effect(SELECTION_EFFECT),
+        options
+            .declare("regex", Value::StringArray(args.patterns.clone()))
+            .dynamic()
+            .check("valid regular expressions", valid_patterns)
+            .effect(SELECTION_EFFECT),
+        options
+            .declare(
+                "exclude",
+                Value::String(args.exclude.clone().unwrap_or_default()),
+            )
+            .dynamic()
+            .check("a valid regular expression", valid_patterns)
+            .effect("Empty: none. Applies from the next discovery."),
+        options.declare("compression", Value::choice(&args.compression)),
+        options.declare(
             "chunk_size",
             Value::Integer(i64::try_from(args.chunk_size).unwrap_or(i64::MAX)),
-            "MCAP chunk size, bytes.",
         ),
-        Declaration::new(
-            "max_chunk_age",
-            Value::Double(args.max_chunk_age),
-            "Seconds before an open chunk is written out.",
-        ),
-        Declaration::new(
-            "split_size_mb",
-            optional(args.split_size_mb),
-            "MB per .mcap file of an episode (0: no split).",
-        ),
-        Declaration::new(
-            "split_duration",
-            optional(args.split_duration),
-            "Seconds per .mcap file of an episode (0: no split).",
-        ),
-        Declaration::new(
-            "task",
-            Value::String(args.task.clone()),
-            "Default task text.",
-        ),
-        Declaration::new(
-            "prefix",
-            Value::String(args.prefix.clone()),
-            "Episode directory name.",
-        ),
-        Declaration::new(
-            "start",
-            Value::Bool(args.start),
-            "Recording started at once.",
-        ),
-        Declaration::new(
-            "queue_mb",
-            Value::Double(args.queue_mb),
-            "Most MB of messages waiting for the writer.",
-        ),
+        options.declare("max_chunk_age", Value::Double(args.max_chunk_age)),
+        options
+            .declare("split_size_mb", optional(args.split_size_mb))
+            .effect("0: no split."),
+        options
+            .declare("split_duration", optional(args.split_duration))
+            .effect("0: no split."),
+        options.declare("task", Value::String(args.task.clone())),
+        options.declare("prefix", Value::String(args.prefix.clone())),
+        options.declare("start", Value::Bool(args.start)),
+        options.declare("queue_mb", Value::Double(args.queue_mb)),
     ])
 }
 
@@ -156,6 +117,7 @@ pub fn declarations(args: &Args) -> Parameters {
 mod tests {
     use super::*;
     use clap::Parser;
+    use so101_core::ros::parameters::documentation::assert_documented;
 
     #[test]
     fn every_dynamic_parameter_is_a_selection_option() {
@@ -196,5 +158,13 @@ mod tests {
             "{:?}",
             results[0]
         );
+    }
+
+    #[test]
+    fn every_option_is_a_parameter() {
+        let parameters = declarations(&Args::parse_from(["recorder_node"]));
+        // How long this run lasts is no setting of the recorder.
+        assert_eq!(Options::of::<Args>().undeclared(&parameters), ["duration"]);
+        assert_documented("recorder_node", &parameters);
     }
 }

@@ -3,9 +3,9 @@
 
 use so101_core::{
     robot::{JointLimit, JOINT_COUNT},
-    ros::parameters::{joint_declarations, Declaration, Parameters, Value},
+    ros::parameters::{joint_declarations, Options, Parameters, Value},
 };
-use so101_sim::cameras::spec::MAX_RATE;
+use so101_sim::cameras::spec::{MAX_RATE, MIN_RATE};
 
 use crate::{cli::Args, pacing::TimeMode};
 
@@ -18,6 +18,7 @@ pub enum Setting {
 
 /// The node's parameters for `args`, the arm's limits as the world enforces them.
 pub fn declarations(args: &Args, limits: &[JointLimit; JOINT_COUNT]) -> Parameters {
+    let options = Options::of::<Args>();
     let text = |value: &dyn std::fmt::Display| Value::String(value.to_string());
     let speed = match args.speed {
         TimeMode::Scaled { speed } => speed.to_string(),
@@ -31,92 +32,37 @@ pub fn declarations(args: &Args, limits: &[JointLimit; JOINT_COUNT]) -> Paramete
         .map(|camera| format!("{}:{}@{}", camera.name, camera.size, camera.rate))
         .collect();
     let mut declarations = vec![
-        Declaration::new("scene", text(&args.scene.display()), "MJCF scene loaded."),
-        Declaration::new(
-            "lite",
-            Value::Bool(args.lite),
-            "Mesh-free visual variant of the scene.",
-        ),
-        Declaration::new(
-            "task",
-            Value::choice(&args.task),
-            "Task scored on /task/reward and /task/success.",
-        ),
-        Declaration::new(
-            "dense_reward",
-            Value::Bool(args.dense_reward),
-            "cube_to_bin: dense shaping (approach, grasp, lift, place) instead of the sparse reward. \
-             Takes effect at the next control period.",
-        )
-        .dynamic(),
-        Declaration::new(
+        options.declare("scene", text(&args.scene.display())),
+        options.declare("lite", Value::Bool(args.lite)),
+        options.declare("task", Value::choice(&args.task)),
+        options
+            .declare("dense_reward", Value::Bool(args.dense_reward))
+            .dynamic()
+            .effect("Takes effect at the next control period."),
+        options.declare(
             "seed",
             Value::Integer(i64::try_from(args.seed).unwrap_or(i64::MAX)),
-            "Seed of the cube placements of /sim/reset.",
         ),
-        Declaration::new(
-            "rate",
-            Value::Double(args.rate),
-            "Control rate (Hz): /joint_states, /clock and the task topics per period.",
-        ),
-        Declaration::new(
-            "speed",
-            Value::String(speed),
-            "Sim time relative to wall time: a factor, \"max\", or \"lockstep\" (--lockstep).",
-        ),
-        Declaration::new(
-            "lockstep",
-            Value::Bool(args.lockstep),
-            "One control period per /sim/step call.",
-        ),
-        Declaration::new(
-            "step_on_command",
-            Value::Bool(args.step_on_command),
-            "Lockstep: every valid command also advances one control period.",
-        ),
-        Declaration::new(
-            "demo",
-            Value::Bool(args.demo),
-            "The built-in demo plays until the first external command.",
-        ),
-        Declaration::new(
-            "cameras",
-            Value::StringArray(cameras),
-            "Rendered cameras as NAME:WIDTHxHEIGHT@RATE (the rate as started).",
-        ),
-        Declaration::new(
-            "camera_size",
-            text(&args.camera_size),
-            "Frame size of the cameras that do not name one.",
-        ),
-        Declaration::new(
-            "camera_rate",
-            Value::Double(args.camera_rate),
-            "Frames per second of sim time of every camera; setting it applies to all cameras \
-             from their next frame.",
-        )
-        .dynamic()
-        .float_range(0.1, MAX_RATE),
-        Declaration::new(
-            "jpeg",
-            Value::Bool(args.jpeg),
-            "JPEG frames are also published on /camera/NAME/image_raw/compressed.",
-        ),
-        Declaration::new(
-            "jpeg_quality",
-            Value::Integer(i64::from(args.jpeg_quality)),
-            "JPEG quality, 1-100.",
-        ),
-        Declaration::new(
-            "renderer",
-            Value::choice(&args.renderer),
-            "Headless OpenGL platform.",
-        ),
-        Declaration::new(
-            "camera_shadows",
-            Value::Bool(args.camera_shadows),
-            "Shadows are rendered.",
-        ),
+        options.declare("rate", Value::Double(args.rate)),
+        options
+            .declare("speed", Value::String(speed))
+            .effect("\"lockstep\" under --lockstep."),
+        options.declare("lockstep", Value::Bool(args.lockstep)),
+        options.declare("step_on_command", Value::Bool(args.step_on_command)),
+        options.declare("demo", Value::Bool(args.demo)),
+        options
+            .declare("cameras", Value::StringArray(cameras))
+            .effect("Served as NAME:WIDTHxHEIGHT@RATE, the rate as started."),
+        options.declare("camera_size", text(&args.camera_size)),
+        options
+            .declare("camera_rate", Value::Double(args.camera_rate))
+            .dynamic()
+            .float_range(MIN_RATE, MAX_RATE)
+            .effect("Setting it applies to every camera from its next frame."),
+        options.declare("jpeg", Value::Bool(args.jpeg)),
+        options.declare("jpeg_quality", Value::Integer(i64::from(args.jpeg_quality))),
+        options.declare("renderer", Value::choice(&args.renderer)),
+        options.declare("camera_shadows", Value::Bool(args.camera_shadows)),
     ];
     declarations.extend(joint_declarations(limits));
     Parameters::new(declarations)
@@ -135,7 +81,7 @@ pub fn setting(name: &str, value: &Value) -> Option<Setting> {
 mod tests {
     use super::*;
     use clap::Parser;
-    use so101_core::robot::JOINT_LIMITS;
+    use so101_core::{robot::JOINT_LIMITS, ros::parameters::documentation::assert_documented};
 
     #[test]
     fn every_dynamic_parameter_has_a_setting_and_the_rest_are_read_only() {
@@ -159,5 +105,13 @@ mod tests {
             parameters.get("cameras"),
             Some(&Value::StringArray(vec!["top:640x480@15".into()]))
         );
+    }
+
+    #[test]
+    fn every_option_is_a_parameter() {
+        let parameters = declarations(&Args::parse_from(["so101_sim_node"]), &JOINT_LIMITS);
+        // How long this run lasts is no setting of the simulation.
+        assert_eq!(Options::of::<Args>().undeclared(&parameters), ["duration"]);
+        assert_documented("so101_sim_node", &parameters);
     }
 }

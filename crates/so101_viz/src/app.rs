@@ -1,88 +1,18 @@
 //! so101_rerun: the stack in the Rerun viewer, live or from episode bags.
 
-use std::path::{Path, PathBuf};
+use std::path::Path;
 
 use anyhow::{bail, Context as _, Result};
-use clap::{Args as ClapArgs, Parser, Subcommand};
 use nalgebra::Isometry3;
-use so101_core::robot::DEFAULT_SCENE;
 use so101_core::ros::shutdown::Shutdown;
-use so101_core::ros::NodeArgs;
 
 use crate::bag;
 use crate::bridge::Bridge;
+use crate::cli::{BagArgs, Command, LiveArgs, RerunArgs, SceneArgs};
 use crate::rerun_log::SceneLog;
 use crate::scene_geometry::SceneGeometry;
 
 const APPLICATION_ID: &str = "so101";
-
-/// Shows the SO-101 stack in Rerun: joint positions and commands, camera images, the arm in 3D
-/// (from the shared kinematic model, with the scene's meshes when installed), cube, bin, reward and
-/// success. Live from the topics (`live`), or from recorder_node's episode bags (`bag`).
-#[derive(Debug, Parser)]
-#[command(version)]
-pub struct Args {
-    #[command(subcommand)]
-    pub command: Command,
-    #[command(flatten)]
-    pub scene: SceneArgs,
-}
-
-#[derive(Debug, ClapArgs)]
-pub struct SceneArgs {
-    /// MJCF scene the shapes are read from.
-    #[arg(long, global = true, default_value = DEFAULT_SCENE)]
-    pub scene: PathBuf,
-    /// Draw the arm with boxes even where the scene's meshes are installed.
-    #[arg(long, global = true)]
-    pub no_meshes: bool,
-    /// Where the arm's base sits in the world, "x,y,z" in m (default: where the scene mounts it).
-    #[arg(long, global = true, value_parser = so101_core::cli_values::parse_point)]
-    pub base_xyz: Option<[f64; 3]>,
-    /// Camera images logged per second of sim time, per camera (0: every image). Full-rate
-    /// 640x480 images make large recordings.
-    #[arg(long, global = true, default_value_t = 5.0)]
-    pub image_rate: f64,
-}
-
-#[derive(Debug, Subcommand)]
-pub enum Command {
-    /// Subscribe to the stack's topics and log them as they come.
-    Live(LiveArgs),
-    /// Turn episode bags into .rrd recordings, one per episode.
-    Bag(BagArgs),
-}
-
-#[derive(Debug, ClapArgs)]
-pub struct LiveArgs {
-    /// Write the recording to this .rrd file.
-    #[arg(long, group = "sink")]
-    pub save: Option<PathBuf>,
-    /// Stream to a running viewer (`rerun`), e.g. rerun+http://127.0.0.1:9876/proxy.
-    #[arg(long, group = "sink", num_args = 0..=1, default_missing_value = "rerun+http://127.0.0.1:9876/proxy")]
-    pub connect: Option<String>,
-    /// Start a viewer (the `rerun` executable on PATH, e.g. .venv/bin/rerun) and stream to it.
-    #[arg(long, group = "sink")]
-    pub spawn: bool,
-    /// Cameras to show, comma-separated ("none" for none).
-    #[arg(long, default_value = "top,front,wrist", value_delimiter = ',')]
-    pub cameras: Vec<String>,
-    /// Stop after this many seconds.
-    #[arg(long)]
-    pub duration: Option<f64>,
-    #[command(flatten)]
-    pub node: NodeArgs,
-}
-
-#[derive(Debug, ClapArgs)]
-pub struct BagArgs {
-    /// Episode bag directories, or directories holding episode_* directories.
-    #[arg(required = true)]
-    pub bags: Vec<PathBuf>,
-    /// Directory for the recordings (EPISODE.rrd).
-    #[arg(long, default_value = "rrd")]
-    pub output: PathBuf,
-}
 
 fn scene_log(rec: rerun::RecordingStream, args: &SceneArgs) -> Result<SceneLog> {
     let scene = SceneGeometry::from_scene_file(&args.scene)?;
@@ -95,10 +25,7 @@ fn scene_log(rec: rerun::RecordingStream, args: &SceneArgs) -> Result<SceneLog> 
     Ok(log)
 }
 
-pub fn run(args: Args) -> Result<()> {
-    if !(args.scene.image_rate >= 0.0 && args.scene.image_rate.is_finite()) {
-        bail!("--image-rate must be 0 or more");
-    }
+pub fn run(args: RerunArgs) -> Result<()> {
     match &args.command {
         Command::Live(live) => run_live(live, &args.scene),
         Command::Bag(bags) => run_bags(bags, &args.scene),
@@ -196,9 +123,10 @@ fn run_bags(args: &BagArgs, scene: &SceneArgs) -> Result<()> {
 /// where two episodes of one run share a name (episode_000000 of two sessions), numbered if
 /// still taken, so no recording overwrites another.
 fn recording_name(episode: &Path, used: &mut std::collections::BTreeSet<String>) -> String {
-    let base = episode
-        .file_name()
-        .map_or_else(|| "episode".into(), |n| n.to_string_lossy().into_owned());
+    let base = episode.file_name().map_or_else(
+        || so101_core::episode_bag::DEFAULT_PREFIX.into(),
+        |n| n.to_string_lossy().into_owned(),
+    );
     let parent = episode
         .parent()
         .and_then(Path::file_name)

@@ -9,6 +9,7 @@
 pub mod app;
 pub mod bag;
 pub mod bridge;
+pub mod cli;
 pub mod live;
 pub mod parameters;
 pub mod rerun_log;

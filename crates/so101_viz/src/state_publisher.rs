@@ -2,62 +2,26 @@
 //! joint state, stamped with the joint state's stamp (sim time with the sim).
 
 use so101_core::contract::topics;
-use std::path::PathBuf;
 use std::time::{Duration, Instant};
 
 use anyhow::{Context as _, Result};
-use clap::Parser;
 use nalgebra::Isometry3;
 use so101_core::command::targets_from_joint_state;
-use so101_core::robot::{DEFAULT_SCENE, JOINT_LIMITS, JOINT_NAMES};
+use so101_core::robot::{JOINT_LIMITS, JOINT_NAMES};
 use so101_core::ros::parameters::ParameterServer;
 use so101_core::ros::rate_limit::RateLimiter;
 use so101_core::ros::shutdown::Shutdown;
-use so101_core::ros::{qos, NodeArgs, RosNode};
+use so101_core::ros::{qos, RosNode};
 use so101_msgs::sensor_msgs::JointState;
 use so101_msgs::std_msgs::String as RosString;
 use so101_msgs::tf2_msgs::TFMessage;
 
+use crate::cli::StatePublisherArgs;
 use crate::scene_geometry::SceneGeometry;
 use crate::tf::{joint_transforms, static_transforms, Frames};
-use crate::urdf::{robot_description, MeshUri};
+use crate::urdf::robot_description;
 
-/// Publishes the SO-101's robot description (URDF) and its tf tree from /joint_states, so RViz and
-/// other ROS tools show the arm (sim or real).
-#[derive(Debug, Parser)]
-#[command(version)]
-pub struct Args {
-    /// MJCF scene the arm's shapes are read from.
-    #[arg(long, default_value = DEFAULT_SCENE)]
-    pub scene: PathBuf,
-    /// Draw the links with boxes even where the scene's meshes are installed.
-    #[arg(long)]
-    pub no_meshes: bool,
-    /// How the URDF names the mesh files: package:// (resolves wherever the so101_description
-    /// package is installed: `so101-description install`) or file:// (absolute paths, this machine
-    /// only).
-    #[arg(long, value_enum, default_value = "package")]
-    pub mesh_uri: MeshUri,
-    /// Parent frame of the arm's base.
-    #[arg(long, default_value = "world")]
-    pub world_frame: String,
-    /// Where the base sits in the world frame, "x,y,z" in m (default: where the scene mounts it).
-    #[arg(long, value_parser = so101_core::cli_values::parse_point)]
-    pub base_xyz: Option<[f64; 3]>,
-    /// Prefix of the arm's frame names ("left" gives left/base, left/shoulder, ...).
-    #[arg(long, default_value = "")]
-    pub frame_prefix: String,
-    /// Print the URDF on stdout and exit.
-    #[arg(long)]
-    pub print_urdf: bool,
-    /// Stop after this many seconds.
-    #[arg(long)]
-    pub duration: Option<f64>,
-    #[command(flatten)]
-    pub node: NodeArgs,
-}
-
-pub fn run(args: Args) -> Result<()> {
+pub fn run(args: StatePublisherArgs) -> Result<()> {
     let geometry = SceneGeometry::from_scene_file(&args.scene)?;
     let meshes = !args.no_meshes && geometry.has_meshes();
     let urdf = robot_description(&geometry, meshes.then_some(args.mesh_uri));

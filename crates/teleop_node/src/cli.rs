@@ -2,9 +2,16 @@
 
 use std::path::PathBuf;
 
-use so101_core::ros::NodeArgs;
+use so101_core::{contract::topics, ros::NodeArgs, task::TaskKind};
 
 use crate::{input::keyboard::KEY_HELP, motion::Mode};
+
+/// Highest speeds and step an operator may set (at start or as parameters at run time).
+pub const MAX_JOINT_SPEED: f64 = 10.0;
+pub const MAX_LINEAR_SPEED: f64 = 1.0;
+pub const MAX_ANGULAR_SPEED: f64 = 10.0;
+pub const MAX_GRIPPER_SPEED: f64 = 20.0;
+pub const MAX_STEP: f64 = 3.2;
 
 /// Where the operator's input comes from.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
@@ -41,25 +48,25 @@ pub struct Args {
     #[arg(long)]
     pub sim_time: bool,
     /// Full joint speed in joint mode, rad/s.
-    #[arg(long, default_value_t = 1.0, value_parser = parse_positive("speed", 10.0))]
+    #[arg(long, default_value_t = 1.0, value_parser = parse_positive("speed", MAX_JOINT_SPEED))]
     pub joint_speed: f64,
     /// Full speed of the grasp point in Cartesian mode, m/s.
-    #[arg(long, default_value_t = 0.1, value_parser = parse_positive("speed", 1.0))]
+    #[arg(long, default_value_t = 0.1, value_parser = parse_positive("speed", MAX_LINEAR_SPEED))]
     pub linear_speed: f64,
     /// Full pitch and roll speed in Cartesian mode, rad/s.
-    #[arg(long, default_value_t = 1.0, value_parser = parse_positive("speed", 10.0))]
+    #[arg(long, default_value_t = 1.0, value_parser = parse_positive("speed", MAX_ANGULAR_SPEED))]
     pub angular_speed: f64,
     /// Full gripper speed, rad/s.
-    #[arg(long, default_value_t = 2.0, value_parser = parse_positive("speed", 20.0))]
+    #[arg(long, default_value_t = 2.0, value_parser = parse_positive("speed", MAX_GRIPPER_SPEED))]
     pub gripper_speed: f64,
     /// Largest change of a joint target in one period for absolute sources (leader, expert), rad.
-    #[arg(long, default_value_t = 0.1, value_parser = parse_positive("step", 3.2))]
+    #[arg(long, default_value_t = 0.1, value_parser = parse_positive("step", MAX_STEP))]
     pub max_step: f64,
     /// Gamepad stick and trigger dead zone (0..0.9).
     #[arg(long, default_value_t = 0.12, value_parser = parse_deadzone)]
     pub deadzone: f64,
     /// Leader: topic of the leader arm's joint states.
-    #[arg(long, default_value = "leader/joint_states")]
+    #[arg(long, default_value = topics::LEADER_JOINT_STATES)]
     pub leader_topic: String,
     /// Leader: seconds without a message after which the follower holds.
     #[arg(long, default_value_t = 0.5, value_parser = parse_positive("timeout", 60.0))]
@@ -89,7 +96,7 @@ pub struct Args {
     #[arg(long, default_value = "0.10,-0.22,0.77", value_parser = so101_core::cli_values::parse_point)]
     pub bin_xyz: [f64; 3],
     /// Task text of the episodes (the recorder's metadata, LeRobot's task).
-    #[arg(long, default_value = "put the cube in the bin")]
+    #[arg(long, default_value = TaskKind::CubeToBin.facts().description)]
     pub task: String,
     /// Write a JSON summary here at exit (the expert's episode results).
     #[arg(long)]

@@ -1,9 +1,14 @@
 //! The teleop node's ROS parameters: its command-line settings, read-only, and the speeds and the
 //! step limit that take effect while it runs. Names are the options' names with '_'.
 
-use so101_core::ros::parameters::{Declaration, Parameters, Value};
+use so101_core::ros::parameters::{Options, Parameters, Value};
 
-use crate::{cli::Args, motion::Speeds};
+use crate::{
+    cli::{
+        Args, MAX_ANGULAR_SPEED, MAX_GRIPPER_SPEED, MAX_JOINT_SPEED, MAX_LINEAR_SPEED, MAX_STEP,
+    },
+    motion::Speeds,
+};
 
 /// What the control loop may change while it runs.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -46,9 +51,11 @@ impl Tunables {
 
 /// The node's parameters for `args`.
 pub fn declarations(args: &Args) -> Parameters {
+    let options = Options::of::<Args>();
     let text = |value: &str| Value::String(value.to_owned());
-    let speed = |name: &str, value: f64, max: f64, description: &str| {
-        Declaration::new(name, Value::Double(value), description)
+    let tunable = |name: &str, value: f64, max: f64| {
+        options
+            .declare(name, Value::Double(value))
             .dynamic()
             .float_range(0.0, max)
             .check("above 0", |value| match value.as_f64() {
@@ -56,114 +63,36 @@ pub fn declarations(args: &Args) -> Parameters {
                 _ => Err("must be above 0".to_owned()),
             })
     };
-    let base = args.base_xyz.to_vec();
-    let bin = args.bin_xyz.to_vec();
+    let script = args
+        .script
+        .as_ref()
+        .map(|path| path.display().to_string())
+        .unwrap_or_default();
     Parameters::new([
-        Declaration::new("source", Value::choice(&args.source), "Input source."),
-        Declaration::new(
-            "mode",
-            Value::choice(&args.mode),
-            "Mode at start (joint or Cartesian).",
-        ),
-        Declaration::new(
-            "rate",
-            Value::Double(args.rate),
-            "/joint_commands per second.",
-        ),
-        Declaration::new("sim_time", Value::Bool(args.sim_time), "Runs on /clock."),
-        speed(
-            "joint_speed",
-            args.joint_speed,
-            10.0,
-            "Full joint speed in joint mode, rad/s.",
-        ),
-        speed(
-            "linear_speed",
-            args.linear_speed,
-            1.0,
-            "Full grasp-point speed in Cartesian mode, m/s.",
-        ),
-        speed(
-            "angular_speed",
-            args.angular_speed,
-            10.0,
-            "Full pitch and roll speed in Cartesian mode, rad/s.",
-        ),
-        speed(
-            "gripper_speed",
-            args.gripper_speed,
-            20.0,
-            "Full gripper speed, rad/s.",
-        ),
-        speed(
-            "max_step",
-            args.max_step,
-            3.2,
-            "Largest change of a joint target in one period for absolute sources (leader, \
-             expert), rad.",
-        ),
-        Declaration::new(
-            "deadzone",
-            Value::Double(args.deadzone),
-            "Gamepad dead zone.",
-        ),
-        Declaration::new(
-            "leader_topic",
-            text(&args.leader_topic),
-            "Leader arm's joint states.",
-        ),
-        Declaration::new(
-            "leader_timeout",
-            Value::Double(args.leader_timeout),
-            "Seconds without a leader message before the follower holds.",
-        ),
-        Declaration::new(
-            "script",
-            text(
-                &args
-                    .script
-                    .as_ref()
-                    .map(|path| path.display().to_string())
-                    .unwrap_or_default(),
-            ),
-            "Scripted source's JSON-lines file.",
-        ),
-        Declaration::new(
-            "episodes",
-            Value::Integer(i64::from(args.episodes)),
-            "Expert: episodes before exit (0: until stopped).",
-        ),
-        Declaration::new(
+        options.declare("source", Value::choice(&args.source)),
+        options.declare("mode", Value::choice(&args.mode)),
+        options.declare("rate", Value::Double(args.rate)),
+        options.declare("sim_time", Value::Bool(args.sim_time)),
+        tunable("joint_speed", args.joint_speed, MAX_JOINT_SPEED),
+        tunable("linear_speed", args.linear_speed, MAX_LINEAR_SPEED),
+        tunable("angular_speed", args.angular_speed, MAX_ANGULAR_SPEED),
+        tunable("gripper_speed", args.gripper_speed, MAX_GRIPPER_SPEED),
+        tunable("max_step", args.max_step, MAX_STEP),
+        options.declare("deadzone", Value::Double(args.deadzone)),
+        options.declare("leader_topic", text(&args.leader_topic)),
+        options.declare("leader_timeout", Value::Double(args.leader_timeout)),
+        options.declare("script", text(&script)),
+        options.declare("episodes", Value::Integer(i64::from(args.episodes))),
+        options.declare(
             "seed",
             Value::Integer(i64::try_from(args.seed).unwrap_or(i64::MAX)),
-            "Expert: seed of its noise.",
         ),
-        Declaration::new(
-            "waypoint_noise",
-            Value::Double(args.waypoint_noise),
-            "Expert: noise on each waypoint, m.",
-        ),
-        Declaration::new(
-            "action_noise",
-            Value::Double(args.action_noise),
-            "Expert: noise on every joint target, rad.",
-        ),
-        Declaration::new(
-            "no_reset",
-            Value::Bool(args.no_reset),
-            "Expert: no /sim/reset per episode.",
-        ),
-        Declaration::new(
-            "base_xyz",
-            Value::DoubleArray(base),
-            "Expert: the arm's base in the world, m.",
-        ),
-        Declaration::new(
-            "bin_xyz",
-            Value::DoubleArray(bin),
-            "Expert: where the cube is dropped, m.",
-        ),
-        Declaration::new("task", text(&args.task), "Task text of the episodes."),
+        options.declare("waypoint_noise", Value::Double(args.waypoint_noise)),
+        options.declare("action_noise", Value::Double(args.action_noise)),
+        options.declare("no_reset", Value::Bool(args.no_reset)),
+        options.declare("base_xyz", Value::DoubleArray(args.base_xyz.to_vec())),
+        options.declare("bin_xyz", Value::DoubleArray(args.bin_xyz.to_vec())),
+        options.declare("task", text(&args.task)),
     ])
 }
 
@@ -171,6 +100,7 @@ pub fn declarations(args: &Args) -> Parameters {
 mod tests {
     use super::*;
     use clap::Parser;
+    use so101_core::ros::parameters::documentation::assert_documented;
 
     #[test]
     fn every_dynamic_parameter_is_a_tunable() {
@@ -186,5 +116,16 @@ mod tests {
         }
         tunables.apply("gripper_speed", &Value::Double(4.0));
         assert_eq!(tunables.speeds.gripper, 4.0);
+    }
+
+    #[test]
+    fn every_option_is_a_parameter() {
+        let parameters = declarations(&Args::parse_from(["teleop_node"]));
+        // Where a run's report goes and how long it lasts are no settings of the node.
+        assert_eq!(
+            Options::of::<Args>().undeclared(&parameters),
+            ["report", "duration"]
+        );
+        assert_documented("teleop_node", &parameters);
     }
 }

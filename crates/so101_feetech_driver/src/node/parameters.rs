@@ -5,111 +5,58 @@ use std::time::Duration;
 
 use so101_core::{
     robot::{JointLimit, JOINT_COUNT},
-    ros::parameters::{joint_declarations, Declaration, Parameters, Value},
+    ros::parameters::{joint_declarations, Options, Parameters, Value},
 };
 
 use crate::{
-    cli::{CycleRate, RunArgs, MAX_STEP_CEILING},
+    cli::{Cli, CycleRate, RunArgs, MAX_COMMAND_TIMEOUT, MAX_STEP_CEILING},
     safety::SafetyConfig,
 };
 
 /// The node's parameters for `args`, with the calibrated joint limits.
 pub fn declarations(args: &RunArgs, limits: &[JointLimit; JOINT_COUNT]) -> Parameters {
+    let options = Options::of::<Cli>();
     let text = |value: &dyn std::fmt::Display| Value::String(value.to_string());
     let rate = match args.rate {
         CycleRate::Hz(hz) => hz.to_string(),
         CycleRate::Max => "max".to_owned(),
     };
-    let mut declarations =
-        vec![
-        Declaration::new("port", text(&args.port.port.display()), "Serial port of the servo bus."),
-        Declaration::new("baud", Value::Integer(i64::from(args.port.baud)), "Bus baud rate."),
-        Declaration::new(
-            "retries",
-            Value::Integer(i64::from(args.port.retries)),
-            "Extra attempts after a transaction got no valid answer.",
-        ),
-        Declaration::new(
-            "bus_slack_ms",
-            Value::Double(args.port.bus_slack_ms),
-            "Milliseconds allowed on top of a transaction's wire time.",
-        ),
-        Declaration::new(
-            "robot_id",
-            Value::String(args.calibration.robot_id.clone()),
-            "Robot id naming the LeRobot calibration file.",
-        ),
-        Declaration::new(
-            "calibration",
-            text(&args.calibration.path().display()),
-            "Calibration file in use.",
-        ),
-        Declaration::new(
-            "leader",
-            Value::Bool(args.calibration.leader),
-            "A leader arm: torque off, /leader/joint_states.",
-        ),
-        Declaration::new(
-            "rate",
-            Value::String(rate),
-            "Control cycles per second, or \"max\".",
-        ),
-        Declaration::new(
-            "telemetry_rate",
-            Value::Double(args.telemetry_rate),
-            "Reads per second of velocity, load, voltage, temperature and current.",
-        ),
-        Declaration::new(
-            "max_step",
-            Value::Double(args.max_step),
-            "Largest distance (rad) a goal may be from the joint's present position and from the \
-             previous goal; bigger moves are approached over several cycles. Takes effect at the \
-             next cycle.",
-        )
-        .dynamic()
-        .float_range(0.0, MAX_STEP_CEILING)
-        .check("above 0", |value| match value.as_f64() {
-            Some(step) if step > 0.0 => Ok(()),
-            _ => Err("a step of 0 would never move the arm; above 0, please".to_owned()),
-        }),
-        Declaration::new(
-            "command_timeout",
-            Value::Double(args.command_timeout),
-            "Seconds without a command after which the arm holds where it is (0: never). Takes \
-             effect at the next cycle.",
-        )
-        .dynamic()
-        .float_range(0.0, 3600.0),
-        Declaration::new(
+    const NEXT_CYCLE: &str = "Takes effect at the next cycle.";
+    let mut declarations = vec![
+        options.declare("port", text(&args.port.port.display())),
+        options.declare("baud", Value::Integer(i64::from(args.port.baud))),
+        options.declare("retries", Value::Integer(i64::from(args.port.retries))),
+        options.declare("bus_slack_ms", Value::Double(args.port.bus_slack_ms)),
+        options.declare("robot_id", Value::String(args.calibration.robot_id.clone())),
+        options
+            .declare("calibration", text(&args.calibration.path().display()))
+            .effect("Served as the file in use."),
+        options.declare("leader", Value::Bool(args.calibration.leader)),
+        options.declare("rate", Value::String(rate)),
+        options.declare("telemetry_rate", Value::Double(args.telemetry_rate)),
+        options
+            .declare("max_step", Value::Double(args.max_step))
+            .dynamic()
+            .float_range(0.0, MAX_STEP_CEILING)
+            .check("above 0", |value| match value.as_f64() {
+                Some(step) if step > 0.0 => Ok(()),
+                _ => Err("a step of 0 would never move the arm; above 0, please".to_owned()),
+            })
+            .effect(NEXT_CYCLE),
+        options
+            .declare("command_timeout", Value::Double(args.command_timeout))
+            .dynamic()
+            .float_range(0.0, MAX_COMMAND_TIMEOUT)
+            .effect(NEXT_CYCLE),
+        options.declare(
             "gripper_torque_limit",
             Value::Integer(i64::from(args.gripper_torque_limit)),
-            "Max_Torque_Limit of the gripper, of 1000.",
         ),
-        Declaration::new(
-            "start_torque_off",
-            Value::Bool(args.start_torque_off),
-            "Started with torque off.",
-        ),
-        Declaration::new(
-            "keep_torque_on_exit",
-            Value::Bool(args.keep_torque_on_exit),
-            "Torque stays on when the node exits.",
-        ),
-        Declaration::new(
-            "write_calibration",
-            Value::Bool(args.write_calibration),
-            "Calibration values may be written into servos whose EPROM differs.",
-        ),
-        Declaration::new(
-            "reconnect_interval",
-            Value::Double(args.reconnect_interval),
-            "Seconds between reconnection attempts.",
-        ),
-        Declaration::new(
-            "reopen_after",
-            Value::Double(args.reopen_after),
-            "Seconds without a position read before the port is reopened.",
-        ),
+        options.declare("start_torque_off", Value::Bool(args.start_torque_off)),
+        options.declare("keep_torque_on_exit", Value::Bool(args.keep_torque_on_exit)),
+        options.declare("write_calibration", Value::Bool(args.write_calibration)),
+        options.declare("reconnect_interval", Value::Double(args.reconnect_interval)),
+        options.declare("reopen_after", Value::Double(args.reopen_after)),
     ];
     declarations.extend(joint_declarations(limits));
     Parameters::new(declarations)
@@ -133,9 +80,8 @@ pub fn safety_with(safety: SafetyConfig, name: &str, value: &Value) -> Option<Sa
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::cli::Cli;
     use clap::Parser;
-    use so101_core::robot::JOINT_LIMITS;
+    use so101_core::{robot::JOINT_LIMITS, ros::parameters::documentation::assert_documented};
 
     fn parameters() -> Parameters {
         let cli = Cli::parse_from(["so101_feetech_driver", "--max-step", "0.05"]);
@@ -175,5 +121,18 @@ mod tests {
         assert!(results.iter().all(|result| !result.successful));
         assert!(changes.is_empty());
         assert_eq!(parameters.get("max_step"), Some(&Value::Double(0.05)));
+    }
+
+    #[test]
+    fn every_option_is_a_parameter() {
+        // A run's length and where its summary goes are no settings of the arm.
+        assert_eq!(
+            Options::of::<Cli>().undeclared(&parameters()),
+            ["duration", "stats_json"]
+        );
+        assert_documented(
+            "so101_feetech_driver (also so101_leader_driver with --leader)",
+            &parameters(),
+        );
     }
 }

@@ -19,6 +19,8 @@ impl fmt::Display for FrameSize {
 const MAX_SIDE: u32 = 4096;
 /// Highest camera rate accepted, frames per second of sim time.
 pub const MAX_RATE: f64 = 1000.0;
+/// Lowest camera rate (frames/s): one frame every 10 s.
+pub const MIN_RATE: f64 = 0.1;
 
 /// One entry of `--cameras`: a model camera by name, with the size and rate it overrides.
 #[derive(Debug, Clone, PartialEq)]
@@ -114,9 +116,9 @@ pub fn parse_size(text: &str) -> Result<FrameSize, String> {
 /// Parses a camera rate in frames per second of sim time.
 pub fn parse_rate(text: &str) -> Result<f64, String> {
     match text.parse::<f64>() {
-        Ok(rate) if rate.is_finite() && rate > 0.0 && rate <= MAX_RATE => Ok(rate),
+        Ok(rate) if (MIN_RATE..=MAX_RATE).contains(&rate) => Ok(rate),
         _ => Err(format!(
-            "{text:?} is not a camera rate above 0 and at most {MAX_RATE} frames/s"
+            "{text:?} is not a camera rate from {MIN_RATE} to {MAX_RATE} frames/s"
         )),
     }
 }

@@ -4,7 +4,7 @@ use std::process::ExitCode;
 
 use clap::Parser;
 use so101_core::ros::logging;
-use so101_viz::app::{run, Args};
+use so101_viz::{app::run, cli::RerunArgs as Args};
 
 fn main() -> ExitCode {
     logging::init();

@@ -4,7 +4,7 @@ use std::process::ExitCode;
 
 use clap::Parser;
 use so101_core::ros::logging;
-use so101_viz::state_publisher::{run, Args};
+use so101_viz::{cli::StatePublisherArgs as Args, state_publisher::run};
 
 fn main() -> ExitCode {
     logging::init();

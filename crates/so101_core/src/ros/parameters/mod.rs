@@ -1,10 +1,13 @@
 //! ROS 2 parameters on every node: what `ros2 param list/get/set/describe` and rclpy's parameter
 //! client expect, declared by each node with its description, read-only or settable at run time.
 
+pub mod documentation;
+pub mod options;
 pub mod server;
 pub mod store;
 pub mod value;
 
+pub use options::Options;
 pub use server::ParameterServer;
 pub use store::{Change, Declaration, Parameters, Value};
 

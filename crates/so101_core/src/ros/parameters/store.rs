@@ -79,6 +79,19 @@ impl Declaration {
         &self.value
     }
 
+    pub fn description(&self) -> &str {
+        &self.description
+    }
+
+    /// Adds what only the parameter says to the description (how a change takes effect).
+    pub fn effect(mut self, text: &str) -> Self {
+        if !self.description.is_empty() {
+            self.description.push(' ');
+        }
+        self.description += text;
+        self
+    }
+
     pub fn read_only(&self) -> bool {
         self.read_only
     }
