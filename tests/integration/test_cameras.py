@@ -300,11 +300,21 @@ def test_jpeg_frames_decode_to_the_raw_frame(sim_factory, ros):
     wait_until(
         lambda: ros.node.count_publishers(sim.name("camera/front/image_raw/compressed")) >= 1, 30.0, "the JPEG publisher", sim
     )
-    step(ros, sim, 1)
-    wait_until(lambda: raw.count() >= 1 and compressed.count() >= 1, 10.0, "a raw and a JPEG frame", sim)
+    # The frame of the sim's start went out before these subscriptions existed, and a step of
+    # 10 ms renders no frame of a 30 Hz camera: step until one is rendered after both subscriptions
+    # were matched (each step is answered once its frames are published).
+    for _ in range(100):
+        step(ros, sim, 1)
+        if raw.count() >= 1 and compressed.count() >= 1:
+            break
+    wait_until(
+        lambda: raw.count() >= 1 and compressed.count() >= 1 and raw.latest().header.stamp == compressed.latest().header.stamp,
+        10.0,
+        "a raw and a JPEG frame of the same instant",
+        sim,
+    )
     jpeg = compressed.latest()
     assert "jpeg" in jpeg.format
-    assert jpeg.header.stamp == raw.latest().header.stamp
     decoded = np.asarray(PilImage.open(io.BytesIO(bytes(jpeg.data))).convert("RGB")).astype(int)
     original = image_array(raw.latest()).astype(int)
     assert decoded.shape == original.shape

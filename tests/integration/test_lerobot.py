@@ -11,6 +11,7 @@ import sys
 from pathlib import Path
 
 import numpy as np
+from frame_grid import frame_zero_instants
 from harness import best_effort_qos, wait_until
 
 JOINTS = ["shoulder_pan", "shoulder_lift", "elbow_flex", "wrist_flex", "wrist_roll", "gripper"]
@@ -87,24 +88,25 @@ def test_expert_bags_become_a_lerobot_dataset_that_lerobot_loads_and_replays(
         count = stop - start
         span = min(states[-1][0], frames[-1][0]) - max(states[0][0], frames[0][0])
         assert abs(count - span * 30) <= 2, f"episode {episode_index}: {count} frames for {span:.2f} s at 30 fps"
-        # Every state row is one of the bag's joint states (in LeRobot units), taken ~1/30 s apart.
+        # Every state row is the bag's joint state (in LeRobot units) in force at its frame's
+        # instant, the frames 1/30 s apart: the instant of frame 0 fits them all. (At rest the arm
+        # publishes one state many times, so a frame alone may match many instants.)
+        times = np.array([stamp for stamp, _ in states])
         table = np.stack([lerobot_units([dict(zip(m.name, m.position))[j] for j in JOINTS]) for _, m in states])
-        matched = []
+        sampled = []
         for k in range(start, stop, 7):
             item = dataset[k]
-            row = item["observation.state"].numpy().astype(np.float64)
-            errors = np.abs(table - row).max(axis=1)
-            best = int(errors.argmin())
-            assert errors[best] < 1e-3, f"frame {k}: state {row} is no joint state of the bag (closest off by {errors[best]})"
-            matched.append((k, states[best][0]))
+            sampled.append((k - start, item["observation.state"].numpy().astype(np.float64)))
             assert item["task"] == "put the cube in the bin"
             assert tuple(item["observation.images.top"].shape) == (3, 48, 64)
-        gaps = [(t2 - t1) / (k2 - k1) for (k1, t1), (k2, t2) in zip(matched, matched[1:])]
-        assert all(abs(gap - 1 / 30) < 0.004 for gap in gaps), f"sim time per frame {gaps}"
+        allowed = frame_zero_instants(times, table, sampled, 30.0, 1e-3)
+        assert allowed, f"episode {episode_index}: no 30 fps grid of the bag's joint states gives the state rows"
+        assert allowed[-1][1] - allowed[0][0] < 1 / 30, f"episode {episode_index}: frame 0 not pinned down: {allowed}"
+        first_instant = (allowed[0][0] + allowed[-1][1]) / 2
         # The video frame matches the bag's image of that instant.
         k = start + count // 2
         item = dataset[k]
-        instant = matched[0][1] + (k - start) / 30
+        instant = first_instant + (k - start) / 30
         stamp, image = min(frames, key=lambda pair: abs(pair[0] - instant))
         original = np.frombuffer(bytes(image.data), dtype=np.uint8).reshape(48, 64, 3).astype(np.float64)
         decoded = item["observation.images.top"].numpy().transpose(1, 2, 0) * 255.0
@@ -118,7 +120,7 @@ def test_expert_bags_become_a_lerobot_dataset_that_lerobot_loads_and_replays(
         # the table and ends in the bin (positions that differ), always a unit quaternion.
         poses = bag_messages(directory, "/cube/pose")
         first, final = dataset[start]["observation.environment_state"].numpy(), last["observation.environment_state"].numpy()
-        for row, instant in ((first, matched[0][1]), (final, matched[0][1] + (stop - 1 - start) / 30)):
+        for row, instant in ((first, first_instant), (final, first_instant + (stop - 1 - start) / 30)):
             _, pose = min(poses, key=lambda pair: abs(pair[0] - instant))
             expected = [pose.pose.position.x, pose.pose.position.y, pose.pose.position.z, pose.pose.orientation.w]
             assert np.allclose(row[:4], expected, atol=2e-3), (row, expected)
