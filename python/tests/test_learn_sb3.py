@@ -15,7 +15,8 @@ import gymnasium as gym
 import numpy as np
 import pytest
 
-from so101.learn import cli, evaluate, sb3_sac
+from so101.envs import action_space, make_env, observation_space
+from so101.learn import cli, eval_recipe, sb3_sac
 from so101.learn.wrappers import (
     ELAPSED,
     FLAT_KEYS,
@@ -25,7 +26,6 @@ from so101.learn.wrappers import (
     flatten,
     relative_action,
 )
-from so101.sim_env import action_space, make_env, observation_space
 
 LIMITS = action_space()
 
@@ -119,7 +119,7 @@ def test_bc_through_imitation_learns_from_expert_demos_and_so101_learn_eval_runs
     assert env["observation"] == [*FLAT_KEYS, ELAPSED] and len(env["observation_shift"]) == 20
     assert all(scale > 0 for scale in env["observation_scale"])
 
-    assert evaluate.find_saved(str(output)) is not None and evaluate.find_saved(str(output / "policy.pth")) is not None
+    assert eval_recipe.find_saved(str(output)) is not None and eval_recipe.find_saved(str(output / "policy.pth")) is not None
     assert cli.main(["eval", str(output), "--eval", "2", "--seed", "1000", "--output", str(tmp_path / "eval"), "--quiet"]) == 0
     report = json.loads((tmp_path / "eval" / "eval_info.json").read_text())
     assert report["aggregated"]["algorithm"] == "bc" and report["aggregated"]["episodes"] == 2
@@ -181,9 +181,9 @@ def test_lerobot_policies_go_to_so101_run_policy_inside_a_network_namespace(tmp_
     policy = tmp_path / "pretrained_model"
     policy.mkdir()
     (policy / "config.json").write_text(json.dumps({"type": "act"}))
-    assert evaluate.find_saved(str(policy)) is None
+    assert eval_recipe.find_saved(str(policy)) is None
     args = cli.parser().parse_args(["eval", str(policy), "--eval", "7", "--seed", "3", "--lite", "--episode-time", "9"])
-    command = evaluate.lerobot_eval_command(args, "out")
+    command = eval_recipe.lerobot_eval_command(args, "out")
     assert command[command.index("-m") + 1] == "so101.run_policy" and str(policy) in command
     for option in ("--eval=7", "--seed=3", "--output=out", "--backend=ros", "--episode-time=9.0", "--videos=0", "--lite"):
         assert option in command

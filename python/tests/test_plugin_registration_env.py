@@ -30,15 +30,15 @@ def registered_env_config():
 def test_plugin_discovery_registers_the_env_type_and_its_gym_ids():
     cls = registered_env_config()
     assert "so101_sim" in EnvConfig.get_known_choices()
-    from so101.lerobot_env import So101SimEnvConfig
+    from so101.lerobot.env import So101SimEnvConfig
 
     assert cls is So101SimEnvConfig
     config = cls()
     assert config.type == "so101_sim" and config.task == "cube_to_bin"
     assert config.package_name == "lerobot_env_so101_sim"
-    for task in ("cube_to_bin", "touch_cube"):
+    for task in contract.TASKS:
         spec = gym.spec(cls(task=task).gym_id)
-        assert spec.entry_point == "so101.lerobot_adapter:So101LeRobotEnv" and spec.kwargs["task"] == task
+        assert spec.entry_point == "so101.lerobot.adapter:So101LeRobotEnv" and spec.kwargs["task"] == task
 
 
 def test_the_env_type_parses_from_the_command_line():
@@ -96,7 +96,7 @@ def test_bad_task_or_camera_is_refused():
 
 
 def test_the_adapter_converts_observations_and_actions_to_lerobot_units():
-    from so101.lerobot_adapter import observation_from_sim, sim_action_from_lerobot
+    from so101.lerobot.adapter import observation_from_sim, sim_action_from_lerobot
 
     low, high = units.JOINT_LIMITS.T
     joints = low + (high - low) * np.array([0.1, 0.3, 0.5, 0.7, 0.9, 0.25])
@@ -105,7 +105,7 @@ def test_the_adapter_converts_observations_and_actions_to_lerobot_units():
     state = np.concatenate([joints, velocities, cube]).astype(np.float32)
     image = np.full((48, 64, 3), 7, dtype=np.uint8)
 
-    from so101.sim_env import observation_from_state
+    from so101.envs import observation_from_state
 
     sim_observation = observation_from_state(state, {"top": image, "front": image})
     observation = observation_from_sim(sim_observation, {"top": (48, 64)}, True)

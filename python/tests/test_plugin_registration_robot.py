@@ -41,7 +41,7 @@ def test_so101_ros_is_a_known_robot_type_that_parses_from_cli_arguments(register
             "--robot.max_relative_target=5",
         ],
     ).robot
-    from so101.lerobot_robot import SO101ROS, SO101ROSConfig
+    from so101.lerobot.robot import SO101ROS, SO101ROSConfig
 
     assert isinstance(config, SO101ROSConfig) and config.type == "so101_ros"
     assert config.namespace == "arm" and config.joint_states_topic == "joint_states"
@@ -63,7 +63,7 @@ def test_so101_ros_is_a_known_robot_type_that_parses_from_cli_arguments(register
 
 
 def test_actions_in_lerobot_units_become_radians_and_missing_joints_hold():
-    from so101.lerobot_robot import command_from_action
+    from so101.lerobot.robot import command_from_action
 
     hold = np.array([0.1, -0.2, 0.3, -0.4, 0.5, 0.6])
     action = {
@@ -87,7 +87,7 @@ def test_actions_in_lerobot_units_become_radians_and_missing_joints_hold():
 
 
 def test_actions_are_clipped_to_the_joint_limits_and_clamped_to_max_relative_target():
-    from so101.lerobot_robot import command_from_action
+    from so101.lerobot.robot import command_from_action
 
     zero = np.zeros(6)
     radians, sent = command_from_action({"shoulder_pan.pos": 500.0, "gripper.pos": -50.0}, zero)
@@ -101,7 +101,7 @@ def test_actions_are_clipped_to_the_joint_limits_and_clamped_to_max_relative_tar
 
 @pytest.mark.parametrize("bad", [float("nan"), float("inf"), "up", [1.0, 2.0]])
 def test_an_action_that_is_not_a_finite_number_is_refused_naming_the_joint(bad):
-    from so101.lerobot_robot import command_from_action
+    from so101.lerobot.robot import command_from_action
 
     with pytest.raises(ValueError, match="elbow_flex.pos"):
         command_from_action({"shoulder_pan.pos": 10.0, "elbow_flex.pos": bad}, np.zeros(6))

@@ -334,7 +334,7 @@ def test_async_inference_drives_the_sim_through_so101_ros(recording, tiny_act, r
 def test_the_robot_drives_the_feetech_driver_alike(arm_factory, tmp_path):
     """The same Robot, in-process, on so101_feetech_driver (servo emulator behind it): observation
     = the driver's /joint_states in LeRobot units; a partial action moves the named joints only."""
-    from so101.lerobot_robot import SO101ROS, SO101ROSConfig
+    from so101.lerobot.robot import SO101ROS, SO101ROSConfig
 
     node, _emulator = arm_factory()
     robot = SO101ROS(SO101ROSConfig(id="arm", calibration_dir=tmp_path / "cal", connect_timeout_s=30.0))
@@ -361,7 +361,7 @@ def test_the_robot_drives_the_feetech_driver_alike(arm_factory, tmp_path):
 
 
 def test_connect_names_the_silent_topic(tmp_path):
-    from so101.lerobot_robot import SO101ROS, SO101ROSConfig
+    from so101.lerobot.robot import SO101ROS, SO101ROSConfig
 
     robot = SO101ROS(SO101ROSConfig(namespace="nobody", calibration_dir=tmp_path, connect_timeout_s=1.0))
     with pytest.raises(TimeoutError, match="/nobody/joint_states"):

@@ -682,7 +682,7 @@ mod tests {
     fn options(dir: &Path) -> BagOptions {
         BagOptions {
             output: dir.to_owned(),
-            prefix: "episode".into(),
+            prefix: so101_core::episode_bag::DEFAULT_PREFIX.into(),
             compression: None,
             chunk_size: 1024,
             max_chunk_age: Duration::from_secs(1),

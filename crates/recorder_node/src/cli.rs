@@ -48,7 +48,7 @@ pub struct Args {
     #[arg(long, default_value = "")]
     pub task: String,
     /// Name of episode directories before their number.
-    #[arg(long, default_value = "episode")]
+    #[arg(long, default_value = so101_core::episode_bag::DEFAULT_PREFIX)]
     pub prefix: String,
     /// Start recording an episode at once (stopped by SIGINT, /recorder/stop or a stop event).
     #[arg(long)]

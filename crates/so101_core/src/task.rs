@@ -31,7 +31,7 @@ pub enum RewardMode {
 }
 
 impl RewardMode {
-    pub fn name(self) -> &'static str {
+    pub const fn name(self) -> &'static str {
         match self {
             Self::Sparse => "sparse",
             Self::Dense => "dense",
@@ -64,7 +64,7 @@ impl TaskKind {
     /// Every task, in the order the command lines list them.
     pub const ALL: [TaskKind; 3] = [Self::CubeToBin, Self::TouchCube, Self::TouchCubeSparse];
 
-    pub fn facts(self) -> &'static TaskFacts {
+    pub const fn facts(self) -> &'static TaskFacts {
         match self {
             Self::CubeToBin => &CUBE_TO_BIN,
             Self::TouchCube => &TOUCH_CUBE,
@@ -157,7 +157,10 @@ mod tests {
     #[test]
     fn every_task_has_distinct_names_and_ids() {
         let mut names: Vec<_> = TaskKind::ALL.iter().map(|kind| kind.name()).collect();
-        let mut ids: Vec<_> = TaskKind::ALL.iter().map(|kind| kind.facts().gym_id).collect();
+        let mut ids: Vec<_> = TaskKind::ALL
+            .iter()
+            .map(|kind| kind.facts().gym_id)
+            .collect();
         names.sort_unstable();
         names.dedup();
         ids.sort_unstable();
@@ -165,7 +168,10 @@ mod tests {
         assert_eq!(names.len(), TaskKind::ALL.len());
         assert_eq!(ids.len(), TaskKind::ALL.len());
         for kind in TaskKind::ALL {
-            assert!(!kind.facts().reward_modes.is_empty(), "{kind} offers no reward");
+            assert!(
+                !kind.facts().reward_modes.is_empty(),
+                "{kind} offers no reward"
+            );
             assert!(kind.facts().episode_steps > 0);
         }
     }

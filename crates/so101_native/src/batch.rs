@@ -42,7 +42,7 @@ impl WorldBatch {
 impl WorldBatch {
     /// `threads`: worker threads stepping the worlds (0: one per CPU core).
     #[new]
-    #[pyo3(signature = (num_worlds, scene, lite = true, task = "cube_to_bin", control_rate = 30.0, dense_reward = false, seed = 0, threads = 0))]
+    #[pyo3(signature = (num_worlds, scene, lite = true, task = so101_core::task::TaskKind::CubeToBin.name(), control_rate = so101_core::task::CONTROL_RATE_HZ, dense_reward = false, seed = 0, threads = 0))]
     #[allow(clippy::too_many_arguments)]
     fn new(
         num_worlds: usize,

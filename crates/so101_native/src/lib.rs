@@ -1,7 +1,7 @@
 //! `so101_native`: the simulation core (so101_sim) as a Python extension. Worlds step, reset with
 //! a seed, observe and render in-process; a batch steps many worlds in one call across threads;
 //! the scripted expert plans in-process. The GIL is released while the physics or the renderer
-//! works. so101.sim_env builds the Gymnasium environments on it.
+//! works. so101.envs builds the Gymnasium environments on it.
 
 mod batch;
 mod cameras;

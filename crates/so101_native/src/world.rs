@@ -108,7 +108,7 @@ impl World {
 #[pymethods]
 impl World {
     #[new]
-    #[pyo3(signature = (scene, lite = true, task = "cube_to_bin", control_rate = 30.0, dense_reward = false, seed = 0))]
+    #[pyo3(signature = (scene, lite = true, task = so101_core::task::TaskKind::CubeToBin.name(), control_rate = so101_core::task::CONTROL_RATE_HZ, dense_reward = false, seed = 0))]
     fn new(
         scene: &str,
         lite: bool,

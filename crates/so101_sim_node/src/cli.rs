@@ -2,7 +2,7 @@
 
 use std::path::PathBuf;
 
-use so101_core::ros::NodeArgs;
+use so101_core::{contract::CAMERA_NAMES, ros::NodeArgs, task::CONTROL_RATE_HZ};
 
 use so101_sim::{
     cameras::spec::{self, CameraList, FrameSize},
@@ -52,15 +52,15 @@ pub struct Args {
     /// Cameras to render, comma-separated: NAME[:WIDTHxHEIGHT][@RATE] (e.g.
     /// "top,front:320x240,wrist@15"), or "none". Each publishes /camera/NAME/image_raw (rgb8) and
     /// /camera/NAME/camera_info, stamped with sim time.
-    #[arg(long, default_value = "top,front,wrist", value_parser = spec::parse_camera_list)]
+    #[arg(long, default_value = CAMERA_NAMES.join(","), value_parser = spec::parse_camera_list)]
     pub cameras: CameraList,
     /// Frame size of the cameras that do not name one.
     #[arg(long, default_value = "640x480", value_parser = spec::parse_size)]
     pub camera_size: FrameSize,
     /// Frames per second of sim time of the cameras that do not name a rate. In real time, frames
     /// the renderer cannot keep up with are skipped (and counted in /diagnostics); in lockstep and
-    /// --speed modes the physics waits for them.
-    #[arg(long, default_value_t = 30.0, value_parser = spec::parse_rate)]
+    /// --speed modes the physics waits for them. Default: the control rate of the tasks and datasets.
+    #[arg(long, default_value_t = CONTROL_RATE_HZ, value_parser = spec::parse_rate)]
     pub camera_rate: f64,
     /// Also publish JPEG (sensor_msgs/CompressedImage) on /camera/NAME/image_raw/compressed.
     #[arg(long)]

@@ -1,9 +1,10 @@
 """The SO-101 ROS 2 stack's Python side: episode bags (recorder_node, rosbag2 MCAP) to LeRobot
 datasets, policies run through rclpy, Gymnasium environments, the launcher, benchmarks.
 
-`import so101` registers the Gymnasium environments (`gym.make("so101/CubeToBin-v0")`, in-process;
-`backend="ros"` for so101_sim_node in lockstep)."""
+`import so101` registers the Gymnasium environments of every task in so101.contract.TASKS
+(`gym.make("so101/CubeToBin-v0")`, in-process; `backend="ros"` for so101_sim_node in lockstep):
+so101.envs. LeRobot's robot and env types live in so101.lerobot."""
 
-from .sim_env import register_envs
+from .envs import register_envs
 
 register_envs()

@@ -27,6 +27,7 @@ from pathlib import Path
 
 import numpy as np
 
+from . import contract
 from .bags import BagError, Episode, camera_frames, episode_dirs, read_episode
 from .messages import rgb_image
 from .resample import frame_times, gaps, parts_between, sample_and_hold
@@ -400,10 +401,12 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(
         prog="so101-bag-to-lerobot", description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
     )
-    parser.add_argument("bags", nargs="+", help="episode bag directories, or directories holding episode_* directories")
+    parser.add_argument(
+        "bags", nargs="+", help=f"episode bag directories, or directories holding {contract.EPISODE_DEFAULT_PREFIX}_* directories"
+    )
     parser.add_argument("--output", type=Path, required=True, help="dataset root directory (must not exist yet)")
     parser.add_argument("--repo-id", default="local/so101_cube_to_bin", help="dataset id (Hub repo id when pushed)")
-    parser.add_argument("--fps", type=int, default=30, help="frames per second of the dataset")
+    parser.add_argument("--fps", type=int, default=int(contract.CONTROL_RATE), help="frames per second of the dataset")
     parser.add_argument(
         "--units",
         choices=["lerobot", "radians"],
@@ -418,7 +421,11 @@ def main(argv: list[str] | None = None) -> int:
         metavar="WxH",
         help="scale every kept camera's frames to WIDTHxHEIGHT, e.g. 128x96 for a small vision policy (default: as recorded)",
     )
-    parser.add_argument("--task", default="put the cube in the bin", help="task text of episodes whose bag names none")
+    parser.add_argument(
+        "--task",
+        default=contract.TASKS["cube_to_bin"].description,
+        help="task text of episodes whose bag names none",
+    )
     parser.add_argument(
         "--no-environment-state",
         action="store_true",

@@ -1,5 +1,5 @@
 """The scripted cube_to_bin expert in-process, as a policy over the Gymnasium environments'
-observations (so101.sim_env): demonstrations for behaviour cloning at simulation speed.
+observations (so101.envs): demonstrations for behaviour cloning at simulation speed.
 
 It is teleop_node's expert (the planner in so101_core::expert, called through so101_native):
 from the settled cube's pose, a grasp from above, a lift, a carry over the bin and a release, as
@@ -18,7 +18,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .sim_env import CONTROL_RATE
+from . import contract
 
 
 class ExpertPolicy:
@@ -28,7 +28,7 @@ class ExpertPolicy:
         action_noise: float = 0.0,
         seed: int = 0,
         max_step: float = 0.1,
-        control_rate: float = CONTROL_RATE,
+        control_rate: float = contract.CONTROL_RATE,
     ):
         import so101_native
 

@@ -350,7 +350,9 @@ class Launch:
         """Until a node exits; returns it (None when none is left). Meanwhile reports each episode
         the recorder closes in `bags`."""
         # Episodes already there (an earlier run's) are not this run's.
-        reported: set[Path] = set(bags.glob("episode_*/metadata.yaml")) if bags is not None else set()
+        reported: set[Path] = (
+            set(bags.glob(f"{contract.EPISODE_DEFAULT_PREFIX}_*/{contract.EPISODE_METADATA_FILE}")) if bags is not None else set()
+        )
         while self.running:
             if bags is not None:
                 report_closed_episodes(bags, reported)
@@ -405,7 +407,9 @@ def parser() -> argparse.ArgumentParser:
     p.add_argument("--record", action="store_true", help="record episode bags with recorder_node")
     p.add_argument("--namespace", default="", help="put every node under /NAMESPACE/")
     p.add_argument("--seed", type=int, default=0, help="sim and expert seed")
-    p.add_argument("--task", default="put the cube in the bin", help="task text of the recorded episodes")
+    p.add_argument(
+        "--task", default=contract.TASKS["cube_to_bin"].description, help="task text of the recorded episodes (the expert's task)"
+    )
     p.add_argument("--log-dir", default=None, help="node logs (default logs/launch-<time>/)")
     p.add_argument("--ready-timeout", type=float, default=30.0, help="seconds a node may take to come up")
     p.add_argument("--stop-timeout", type=float, default=15.0, help="seconds a node may take to stop before it is killed")

@@ -29,7 +29,6 @@ from .policy import PolicyError, StackPolicy
 from .rclpy_wait import spin_until
 from .units import JOINT_LIMITS, JOINT_NAMES
 
-DEFAULT_TASK = "put the cube in the bin"
 log = logging.getLogger("so101-run-policy")
 
 
@@ -162,8 +161,8 @@ def run_live(args, policy: StackPolicy) -> int:
 
 # =========================================================================== evaluation
 def evaluate(args, policy: StackPolicy) -> int:
-    from .evaluation import run_episodes, summarize, write_report
-    from .sim_env import make_env
+    from .envs import make_env
+    from .eval_episodes import run_episodes, summarize, write_report
 
     cameras = {camera.name: (camera.height, camera.width) for camera in policy.cameras}
     # The video shows the policy's cameras, or --video-camera; a policy without cameras is filmed
@@ -228,14 +227,18 @@ def parser() -> argparse.ArgumentParser:
         prog="so101-run-policy", description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
     )
     p.add_argument("policy", help="a LeRobot policy: a pretrained_model directory or a Hugging Face Hub id")
-    p.add_argument("--fps", type=float, default=30.0, help="control rate: the fps of the policy's training dataset")
+    p.add_argument(
+        "--fps", type=float, default=contract.CONTROL_RATE, help="control rate: the fps of the policy's training dataset"
+    )
     p.add_argument(
         "--units",
         choices=["lerobot", "radians"],
         default="lerobot",
         help="joint units the policy was trained in (so101-bag-to-lerobot's default is lerobot)",
     )
-    p.add_argument("--task", default=DEFAULT_TASK, help="task text for language-conditioned policies")
+    p.add_argument(
+        "--task", default=None, help="task text for language-conditioned policies (default: the --sim-task's description)"
+    )
     p.add_argument("--device", default=None, help="torch device (default: cuda when available, else cpu)")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     live = p.add_argument_group("live")
@@ -256,7 +259,10 @@ def parser() -> argparse.ArgumentParser:
     ev.add_argument("--seed", type=int, default=0, help="seed of the first episode (then seed+1, ...)")
     ev.add_argument("--episode-time", type=float, default=20.0, help="sim seconds before an episode counts as failed")
     ev.add_argument(
-        "--sim-task", default="cube_to_bin", choices=["cube_to_bin", "touch_cube", "touch_cube_sparse"], help="the sim's task"
+        "--sim-task",
+        default="cube_to_bin",
+        choices=list(contract.TASKS),
+        help="the sim's task (its description: --task's default)",
     )
     ev.add_argument(
         "--backend",
@@ -268,8 +274,9 @@ def parser() -> argparse.ArgumentParser:
     ev.add_argument(
         "--reward",
         choices=["dense", "sparse"],
-        default="dense",
-        help="the sim's reward: dense shows how close a failed episode came (cube_to_bin)",
+        default=None,
+        help="the sim's reward, one the task offers (contract.TASKS); default: dense where the task has it, "
+        "which shows how close a failed episode came",
     )
     ev.add_argument("--lite", action="store_true", help="sim without meshes (faster to render on a CPU)")
     ev.add_argument(
@@ -296,8 +303,13 @@ def main(argv: list[str] | None = None) -> int:
         raise SystemExit("so101-run-policy: --videos must not be negative")
     if args.episode_time <= 0:
         raise SystemExit("so101-run-policy: --episode-time must be positive")
+    modes = contract.TASKS[args.sim_task].reward_modes
+    args.reward = args.reward or ("dense" if "dense" in modes else modes[0])
+    if args.reward not in modes:
+        raise SystemExit(f"so101-run-policy: {args.sim_task} has no {args.reward} reward (it offers: {', '.join(modes)})")
     try:
-        policy = StackPolicy(args.policy, units=args.units, device=args.device, task=args.task)
+        task = args.task or contract.TASKS[args.sim_task].description
+        policy = StackPolicy(args.policy, units=args.units, device=args.device, task=task)
         return evaluate(args, policy) if args.eval > 0 else run_live(args, policy)
     except PolicyError as error:
         # Loading or a non-finite action: the runner stops sending, the arm's node holds.

@@ -39,7 +39,7 @@ struct Args {
     #[arg(long, default_value_t = 480)]
     height: u32,
     /// Images per second per camera; 0 publishes them as fast as DDS takes them.
-    #[arg(long, default_value_t = 30.0)]
+    #[arg(long, default_value_t = so101_core::task::CONTROL_RATE_HZ)]
     camera_rate: f64,
     /// JointState messages per second on /joint_states; 0 for none.
     #[arg(long, default_value_t = 500.0)]

@@ -25,14 +25,14 @@ import subprocess
 import sys
 from pathlib import Path
 
-from so101 import process
+from so101 import contract, process
 from so101.bench import common as bench_common
 
 # (label, lite, cameras, size)
 CONFIGS = [
     ("lite visuals, top, 640x480", True, "top", "640x480"),
     ("meshes, top, 640x480", False, "top", "640x480"),
-    ("meshes, top+front+wrist, 640x480", False, "top,front,wrist", "640x480"),
+    (f"meshes, {'+'.join(contract.CAMERA_NAMES)}, 640x480", False, ",".join(contract.CAMERA_NAMES), "640x480"),
     ("meshes, top, 320x240", False, "top", "320x240"),
 ]
 

@@ -17,6 +17,7 @@ import tempfile
 import time
 from pathlib import Path
 
+from so101 import contract
 from so101.bench import common as bench_common
 
 
@@ -36,11 +37,11 @@ def record(bin_dir: Path, bags: Path, episodes: int, size: str) -> float:
             "--seed",
             "1",
             "--cameras",
-            "top,front,wrist",
+            ",".join(contract.CAMERA_NAMES),
             "--camera-size",
             size,
             "--camera-rate",
-            "30",
+            f"{contract.CONTROL_RATE:g}",
         ],
         env=node_env(),
         stderr=subprocess.DEVNULL,

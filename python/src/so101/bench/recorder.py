@@ -26,7 +26,7 @@ import tempfile
 import time
 from pathlib import Path
 
-from so101 import process
+from so101 import contract, process
 from so101.paths import node_environment
 
 CLOCK_TICKS = os.sysconf("SC_CLK_TCK")
@@ -67,8 +67,8 @@ def record(bin_dir: Path, out: Path, publisher_args: list[str]) -> dict:
         raise RuntimeError(f"recorder failed: {stderr[-2000:]}")
     import yaml
 
-    episode = sorted(glob.glob(str(out / "episode_*")))[-1]
-    meta = yaml.safe_load(Path(episode, "metadata.yaml").read_text())["rosbag2_bagfile_information"]
+    episode = sorted(glob.glob(str(out / f"{contract.EPISODE_DEFAULT_PREFIX}_*")))[-1]
+    meta = yaml.safe_load(Path(episode, contract.EPISODE_METADATA_FILE).read_text())["rosbag2_bagfile_information"]
     counts = {t["topic_metadata"]["name"]: t["message_count"] for t in meta["topics_with_message_count"]}
     files = [Path(episode, f["path"]) for f in meta["files"]]
     return {

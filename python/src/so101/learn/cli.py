@@ -17,7 +17,7 @@ from __future__ import annotations
 import argparse
 import sys
 
-from . import demos, evaluate, lerobot_train, sb3_bc, sb3_sac
+from . import demos, eval_recipe, lerobot_train, sb3_bc, sb3_sac
 
 RECIPES = {
     "demos": demos,
@@ -25,7 +25,7 @@ RECIPES = {
     "diffusion": lerobot_train,
     "bc": sb3_bc,
     "sac": sb3_sac,
-    "eval": evaluate,
+    "eval": eval_recipe,
 }
 
 

@@ -17,6 +17,7 @@ import sys
 import time
 from pathlib import Path
 
+from .. import contract
 from ..paths import repo_root
 from .recipe import recipe_parser
 
@@ -34,7 +35,7 @@ def add_parser(recipes, name: str) -> None:
     p.add_argument(
         "--cameras",
         default="none",
-        help='cameras to record, the sim\'s --cameras notation ("none", "top:128x96", "top,front,wrist")',
+        help=f'cameras to record, the sim\'s --cameras notation ("none", "top:128x96", "{",".join(contract.CAMERA_NAMES)}")',
     )
     p.add_argument("--speed", type=float, default=None, help="sim speed (default 8 without cameras, else 4)")
     p.add_argument("--keep-failures", action="store_true", help="keep episodes the expert failed")
@@ -82,7 +83,7 @@ def run(args) -> int:
     print(f"==> recording {args.episodes} expert demonstration(s) into {output / 'bags'}", flush=True)
     launched = subprocess.run(launch_command(args, output), stdout=subprocess.PIPE, text=True)
     # The launcher prints one line per recorded episode: show them as they were, count successes.
-    recorded = [line for line in launched.stdout.splitlines() if "recorded episode_" in line]
+    recorded = [line for line in launched.stdout.splitlines() if f"recorded {contract.EPISODE_DEFAULT_PREFIX}_" in line]
     print("\n".join(recorded))
     if launched.returncode != 0:
         print(launched.stdout[-4000:], file=sys.stderr)

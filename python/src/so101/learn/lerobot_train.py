@@ -29,7 +29,7 @@ import time
 from pathlib import Path
 
 from ..paths import repo_root
-from .evaluate import run_policy_command
+from .eval_recipe import run_policy_command
 from .recipe import recipe_parser
 
 NORMALIZE_ALL = '{"VISUAL":"MEAN_STD","STATE":"MEAN_STD","ENV":"MEAN_STD","ACTION":"MEAN_STD"}'

@@ -170,7 +170,7 @@ def train(
 def run(args) -> int:
     import torch
 
-    from .evaluate import evaluate_saved
+    from .eval_recipe import evaluate_saved
 
     torch.set_num_threads(args.torch_threads)
     output = Path(args.output or repo_root() / "outputs" / f"bc-{time.strftime('%Y%m%d-%H%M%S')}")

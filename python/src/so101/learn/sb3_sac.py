@@ -30,20 +30,23 @@ from pathlib import Path
 
 import numpy as np
 
+from .. import contract
 from ..paths import repo_root
-from .evaluate import VEC_NORMALIZE_FILE
+from .eval_recipe import VEC_NORMALIZE_FILE
 from .recipe import recipe_parser
 from .wrappers import MAX_STEP, SETTINGS_FILE, EnvSettings
 
 MODEL_FILE = "model.zip"
 REPLAY_FILE = "replay_buffer.pkl"
 CHECKPOINT_FILE = "checkpoint.json"  # steps and training wall time up to the checkpoint
+# SAC learns from the dense reward: the tasks that have one.
+DENSE_TASKS = [name for name, task in contract.TASKS.items() if "dense" in task.reward_modes]
 PROGRESS_FIELDS = ["timesteps", "episodes", "successes", "success_rate", "ci95_low", "ci95_high", "mean_reward", "wall_time_s"]
 
 
 def add_parser(subparsers, name: str) -> None:
     p = recipe_parser(subparsers, name, "SAC (Stable-Baselines3) on the dense reward, success rate over training", __doc__)
-    p.add_argument("--task", choices=["touch_cube", "cube_to_bin"], default="touch_cube")
+    p.add_argument("--task", choices=DENSE_TASKS, default="touch_cube", help="a task with a dense reward")
     p.add_argument("--steps", type=int, default=50_000, help="environment steps in all (with --resume: the total to reach)")
     p.add_argument("--n-envs", type=int, default=1, help="worlds stepped together (one gradient step per vector step)")
     p.add_argument("--vec-normalize", action="store_true", help="standardize observations with running statistics")
@@ -101,7 +104,7 @@ def save_checkpoint(model, output: Path, wall_time: float) -> Path:
 # =========================================================================== evaluation
 def evaluate_model(model, settings: EnvSettings, env, episodes: int, seed: int) -> dict:
     """The current policy over `episodes` seeded episodes (deterministic): a progress.csv row."""
-    from ..evaluation import run_episodes
+    from ..eval_episodes import run_episodes
     from ..stats import wilson_interval
 
     normalizer = model.get_vec_normalize_env()
@@ -120,7 +123,7 @@ def evaluate_model(model, settings: EnvSettings, env, episodes: int, seed: int) 
         max_steps=settings.episode_steps,
         video_cameras=[],
         output=Path("."),
-        fps=30.0,
+        fps=contract.CONTROL_RATE,
         quiet=True,
     )
     successes = sum(r.success for r in results)

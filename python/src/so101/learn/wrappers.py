@@ -1,4 +1,4 @@
-"""Gymnasium wrappers that put the stack's in-process envs (so101.sim_env) into the shape
+"""Gymnasium wrappers that put the stack's in-process envs (so101.envs) into the shape
 Stable-Baselines3 and `imitation` expect: one flat Box observation and actions in [-1, 1].
 
 Flat observation (float32[19]), in this order: agent_pos (6 joint positions, rad), agent_vel (6 joint
@@ -25,7 +25,8 @@ import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
 
-from ..sim_env import CONTROL_RATE, TASKS, make_env
+from .. import contract
+from ..envs import make_env
 
 # The flat observation's parts, in order; "elapsed" follows when the phase cue is on.
 FLAT_KEYS = ("agent_pos", "agent_vel", "environment_state")
@@ -35,7 +36,7 @@ MAX_STEP = 0.1
 # EnvSettings it was trained with (so101-learn eval rebuilds the same env from it).
 SETTINGS_FILE = "so101_learn.json"
 # task -> steps of an episode (the registered envs' TimeLimit).
-EPISODE_STEPS = {task: steps for task, steps in TASKS.values()}
+EPISODE_STEPS = {name: task.episode_steps for name, task in contract.TASKS.items()}
 
 
 def flatten(observation: dict, keys=FLAT_KEYS) -> np.ndarray:
@@ -53,7 +54,7 @@ def relative_action(target, positions, max_step) -> np.ndarray:
 class ElapsedTime(gym.Wrapper):
     """Adds observation["elapsed"], float64[1]: seconds since the reset (steps / control rate)."""
 
-    def __init__(self, env: gym.Env, control_rate: float = CONTROL_RATE):
+    def __init__(self, env: gym.Env, control_rate: float = contract.CONTROL_RATE):
         super().__init__(env)
         self.observation_space = spaces.Dict(
             {**env.observation_space.spaces, ELAPSED: spaces.Box(0.0, np.inf, shape=(1,), dtype=np.float64)}
@@ -140,7 +141,7 @@ class EnvSettings:
 
     def make(self, flat: bool = True, cameras: dict[str, tuple[int, int]] | None = None, lite: bool = True) -> gym.Env:
         """The in-process env with relative actions; `flat`: the flat observation and a TimeLimit
-        (for SB3); otherwise the dict observation (pixels included), for so101.evaluation."""
+        (for SB3); otherwise the dict observation (pixels included), for so101.eval_episodes."""
         env = make_env(self.task, lite=lite, cameras=cameras, dense_reward=self.dense_reward)
         env = RelativeJointTargets(env, self.max_step)
         if self.elapsed_time:

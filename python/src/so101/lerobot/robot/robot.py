@@ -10,7 +10,7 @@ from typing import Any
 import numpy as np
 from lerobot.robots import Robot
 
-from ..units import FEATURE_NAMES, JOINT_NAMES, lerobot_from_radians
+from ...units import FEATURE_NAMES, JOINT_NAMES, lerobot_from_radians
 from .actions import command_from_action
 from .config import SO101ROSConfig
 
@@ -63,7 +63,7 @@ class SO101ROS(Robot):
         from rclpy.qos import qos_profile_sensor_data
         from sensor_msgs.msg import Image, JointState
 
-        from ..messages import joint_positions
+        from ...messages import joint_positions
 
         with self._lock:
             self._state, self._frames, self._goal = None, {}, None
@@ -152,7 +152,7 @@ class SO101ROS(Robot):
     def get_observation(self) -> dict[str, Any]:
         if not self.is_connected:
             raise RuntimeError(f"{self} is not connected")
-        from ..messages import rgb_image
+        from ...messages import rgb_image
 
         with self._lock:
             state, age, frames = self._state, time.monotonic() - self._state_time, dict(self._frames)

@@ -1,4 +1,4 @@
-"""The in-process Gymnasium environments (so101.sim_env over the so101_native extension): gymnasium's
+"""The in-process Gymnasium environments (so101.envs.inprocess over the so101_native extension): gymnasium's
 checker, seeded resets, the native batch behind make_vec against single worlds, cameras, rewards,
 and the scripted expert putting the cube in the bin. No ROS, no DDS."""
 
@@ -9,8 +9,8 @@ import numpy as np
 import pytest
 
 import so101  # noqa: F401  (registers the environments)
+from so101.envs import So101InProcessEnv, So101VectorEnv
 from so101.expert import ExpertPolicy
-from so101.sim_env import So101InProcessEnv, So101VectorEnv
 
 HOLD = np.array([0.3, -0.2, 0.2, 0.5, 0.0, 0.5], dtype=np.float32)
 

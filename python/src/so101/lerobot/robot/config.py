@@ -6,7 +6,7 @@ from dataclasses import dataclass, field
 
 from lerobot.robots import RobotConfig
 
-from .. import contract
+from ... import contract
 
 
 @dataclass
@@ -17,7 +17,7 @@ class RosCameraConfig:
     topic: str = ""  # default: camera/<name>/image_raw under the namespace
     width: int = 640
     height: int = 480
-    fps: int = 30
+    fps: int = int(contract.CONTROL_RATE)  # the cameras publish at the control rate by default
 
 
 @RobotConfig.register_subclass("so101_ros")

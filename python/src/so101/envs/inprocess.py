@@ -1,90 +1,41 @@
-"""The Gymnasium environments of the SO-101 tasks, in-process by default: `so101/CubeToBin-v0`,
-`so101/TouchCube-v0`, `so101/TouchCubeSparse-v0` (the sim node's three tasks), registered by
-`import so101`.
+"""The in-process backend of the Gymnasium environments: the simulation core (crates/so101_sim, the
+physics, tasks, rewards and success the sim node runs) stepped through the so101_native extension,
+with no ROS and no process to start: seeded resets restart nothing. Both backends give the same
+trajectory for the same seed and actions (so101.envs.ros is the other one).
 
-The in-process backend steps the simulation core (crates/so101_sim, the physics, tasks, rewards and
-success the sim node runs) through the so101_native extension, with no ROS and no process to
-start: seeded resets restart nothing. `backend="ros"` runs the same tasks on so101_sim_node in
-lockstep over ROS (so101.gym_env), for full-stack runs; both give the same trajectory for the
-same seed and actions (tests/integration/test_sim_parity.py).
+Observations and actions: so101.envs.spaces. Reward: the task's (`dense_reward=True`:
+cube_to_bin's staged shaping); terminated when the task succeeds if the task's facts say so
+(contract.TASKS[task].terminates_on_success); truncated by max_episode_steps; info["is_success"].
 
-Observation (a dict): "agent_pos" float64[6] joint positions (rad), "agent_vel" float64[6] joint
-velocities (rad/s), "environment_state" float64[7] cube position (m, world frame) and
-orientation (w x y z), "pixels" {camera: uint8[H, W, 3]} with `cameras={"top": (H, W), ...}`.
-Action: float32[6] joint position targets (rad), clamped to the joint limits. Reward: the task's
-(`dense_reward=True`: cube_to_bin's staged shaping); terminated when cube_to_bin succeeds;
-truncated by max_episode_steps; info["is_success"].
-
-`gym.make_vec(id, num_envs=N)` steps N worlds in one native call across threads
-(So101VectorEnv, a gymnasium VectorEnv with next-step autoreset), not N processes.
+So101VectorEnv steps N worlds in one native call across threads (a gymnasium VectorEnv with
+next-step autoreset), not N processes: what `gym.make_vec(id, num_envs=N)` gives.
 """
 
 from __future__ import annotations
 
 import gymnasium as gym
 import numpy as np
-from gymnasium import spaces
 from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
-from .paths import asset
-from .units import JOINT_LIMITS
-
-# env id -> (task, steps of an episode)
-TASKS = {
-    "so101/CubeToBin-v0": ("cube_to_bin", 600),
-    "so101/TouchCube-v0": ("touch_cube", 300),
-    "so101/TouchCubeSparse-v0": ("touch_cube_sparse", 300),
-}
-STATE = {"agent_pos": slice(0, 6), "agent_vel": slice(6, 12), "environment_state": slice(12, 19)}
-CONTROL_RATE = 30.0
+from .. import contract
+from ..paths import asset
+from .spaces import STATE, action_space, checked_action, observation_from_state, observation_space, task_facts
 
 
 def default_scene() -> str:
     return str(asset("so101_cube_to_bin.xml"))
 
 
-def observation_space(cameras: dict[str, tuple[int, int]]) -> spaces.Dict:
-    space = {
-        "agent_pos": spaces.Box(-np.inf, np.inf, shape=(6,), dtype=np.float64),
-        "agent_vel": spaces.Box(-np.inf, np.inf, shape=(6,), dtype=np.float64),
-        "environment_state": spaces.Box(-np.inf, np.inf, shape=(7,), dtype=np.float64),
-    }
-    if cameras:
-        space["pixels"] = spaces.Dict(
-            {name: spaces.Box(0, 255, shape=(h, w, 3), dtype=np.uint8) for name, (h, w) in cameras.items()}
-        )
-    return spaces.Dict(space)
-
-
-def action_space() -> spaces.Box:
-    return spaces.Box(JOINT_LIMITS[:, 0].astype(np.float32), JOINT_LIMITS[:, 1].astype(np.float32), dtype=np.float32)
-
-
-def observation_from_state(state: np.ndarray, pixels: dict | None) -> dict:
-    """The dict observation from the 19-vector (joints, velocities, cube pose) and the frames."""
-    observation = {key: np.array(state[part], dtype=np.float64) for key, part in STATE.items()}
-    if pixels is not None:
-        observation["pixels"] = pixels
-    return observation
-
-
-def checked_action(action) -> np.ndarray:
-    action = np.asarray(action, dtype=np.float64).reshape(-1)
-    if action.shape != (6,) or not np.all(np.isfinite(action)):
-        raise ValueError(f"an action is six finite joint targets (rad), not {action}")
-    return action
-
-
 class So101InProcessEnv(gym.Env):
     """One world of the simulation core, in this process."""
 
-    metadata = {"render_modes": ["rgb_array"], "render_fps": CONTROL_RATE}
+    metadata = {"render_modes": ["rgb_array"], "render_fps": contract.CONTROL_RATE}
 
     def __init__(
         self,
         task: str = "cube_to_bin",
-        control_rate: float = CONTROL_RATE,
+        control_rate: float | None = None,  # None: the task's
         lite: bool = True,
         cameras: dict[str, tuple[int, int]] | None = None,
         dense_reward: bool = False,
@@ -96,7 +47,9 @@ class So101InProcessEnv(gym.Env):
     ):
         import so101_native
 
-        self._task = task
+        facts = task_facts(task)
+        control_rate = facts.control_rate if control_rate is None else control_rate
+        self._terminates_on_success = facts.terminates_on_success
         self._cameras = {name: (int(h), int(w)) for name, (h, w) in (cameras or {}).items()}
         self.render_mode = render_mode
         self._render_camera = render_camera
@@ -131,7 +84,7 @@ class So101InProcessEnv(gym.Env):
     def step(self, action):
         self._world.step(checked_action(action))
         observation, reward, success = self._observe()
-        terminated = success and self._task == "cube_to_bin"
+        terminated = success and self._terminates_on_success
         return observation, reward, terminated, False, {"is_success": success}
 
     def render(self):
@@ -157,7 +110,7 @@ class So101VectorEnv(VectorEnv):
         num_envs: int,
         task: str = "cube_to_bin",
         max_episode_steps: int | None = None,
-        control_rate: float = CONTROL_RATE,
+        control_rate: float | None = None,  # None: the task's
         lite: bool = True,
         cameras: dict[str, tuple[int, int]] | None = None,
         dense_reward: bool = False,
@@ -168,8 +121,10 @@ class So101VectorEnv(VectorEnv):
     ):
         import so101_native
 
+        facts = task_facts(task)
+        control_rate = facts.control_rate if control_rate is None else control_rate
         self.num_envs = num_envs
-        self._task = task
+        self._terminates_on_success = facts.terminates_on_success
         self._max_steps = max_episode_steps
         self._cameras = {name: (int(h), int(w)) for name, (h, w) in (cameras or {}).items()}
         self._batch = so101_native.WorldBatch(
@@ -224,7 +179,7 @@ class So101VectorEnv(VectorEnv):
         )
         self._steps += 1
         observation, rewards, successes = self._observe()
-        terminated = successes & (self._task == "cube_to_bin")
+        terminated = successes & self._terminates_on_success
         truncated = (self._steps >= self._max_steps) if self._max_steps else np.zeros(self.num_envs, dtype=bool)
         if len(resetting):
             # Next-step autoreset: the resetting worlds report their new episode's start.
@@ -237,38 +192,3 @@ class So101VectorEnv(VectorEnv):
 
     def close_extras(self, **kwargs):
         self._batch = None
-
-
-def make_env(task: str = "cube_to_bin", backend: str = "inprocess", **kwargs) -> gym.Env:
-    """The env of `task` on `backend` ("inprocess" or "ros")."""
-    if backend == "inprocess":
-        return So101InProcessEnv(task=task, **kwargs)
-    if backend == "ros":
-        from .gym_env import So101SimEnv
-
-        return So101SimEnv(task=task, **kwargs)
-    raise ValueError(f"backend {backend!r}: 'inprocess' or 'ros'")
-
-
-def make_vector_env(num_envs: int, task: str = "cube_to_bin", backend: str = "inprocess", **kwargs) -> VectorEnv:
-    """make_vec's entry point: the native batch in-process; one ROS env per world otherwise."""
-    if backend == "inprocess":
-        return So101VectorEnv(num_envs, task=task, **kwargs)
-    steps = kwargs.pop("max_episode_steps", None)
-    return gym.vector.SyncVectorEnv(
-        [lambda: gym.wrappers.TimeLimit(make_env(task, backend, **kwargs), steps) if steps else make_env(task, backend, **kwargs)]
-        * num_envs
-    )
-
-
-def register_envs() -> None:
-    """Registers the environments (`import so101` does)."""
-    for env_id, (task, steps) in TASKS.items():
-        if env_id not in gym.registry:
-            gym.register(
-                env_id,
-                entry_point="so101.sim_env:make_env",
-                vector_entry_point="so101.sim_env:make_vector_env",
-                kwargs={"task": task},
-                max_episode_steps=steps,
-            )

@@ -1,5 +1,5 @@
-"""The Gymnasium env behind LeRobot's env type `so101_sim` (so101.lerobot_env): the task env of
-so101.sim_env (in-process by default; backend "ros" for so101_sim_node in lockstep) seen the way
+"""The Gymnasium env behind LeRobot's env type `so101_sim` (so101.lerobot.env): the task env of
+so101.envs (in-process by default; backend "ros" for so101_sim_node in lockstep) seen the way
 LeRobot's envs and the converter's datasets see the robot.
 
 Observation: {"agent_pos": float32[6] joint positions in LeRobot units (degrees, gripper 0-100),
@@ -15,11 +15,13 @@ import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
 
-from .units import JOINT_LIMITS, lerobot_from_radians, radians_from_lerobot
+from .. import contract
+from ..envs import make_env
+from ..units import JOINT_LIMITS, lerobot_from_radians, radians_from_lerobot
 
 
 def observation_from_sim(sim_observation: dict, cameras, environment_state: bool) -> dict:
-    """so101.sim_env's observation (radians) -> LeRobot's env observation."""
+    """so101.envs' observation (radians) -> LeRobot's env observation."""
     observation = {"agent_pos": lerobot_from_radians(sim_observation["agent_pos"]).astype(np.float32)}
     if environment_state:
         observation["environment_state"] = np.asarray(sim_observation["environment_state"], dtype=np.float32)
@@ -29,7 +31,7 @@ def observation_from_sim(sim_observation: dict, cameras, environment_state: bool
 
 
 def sim_action_from_lerobot(action) -> np.ndarray:
-    """A LeRobot action (degrees, gripper 0-100) -> so101.sim_env's (radians)."""
+    """A LeRobot action (degrees, gripper 0-100) -> so101.envs' (radians)."""
     action = np.asarray(action, dtype=np.float64).reshape(-1)
     if action.shape != (6,):
         raise ValueError(f"an so101_sim action is 6 joint targets, not shape {action.shape}")
@@ -37,13 +39,13 @@ def sim_action_from_lerobot(action) -> np.ndarray:
 
 
 class So101LeRobotEnv(gym.Env):
-    metadata = {"render_modes": ["rgb_array"], "render_fps": 30}
+    metadata = {"render_modes": ["rgb_array"], "render_fps": int(contract.CONTROL_RATE)}
 
     def __init__(
         self,
         task: str = "cube_to_bin",
         cameras: dict[str, tuple[int, int]] | None = None,
-        fps: int = 30,
+        fps: int = int(contract.CONTROL_RATE),
         environment_state: bool = False,
         task_description: str = "",
         lite: bool = True,
@@ -52,8 +54,6 @@ class So101LeRobotEnv(gym.Env):
         render_mode: str = "rgb_array",
         backend: str = "inprocess",
     ):
-        from .sim_env import make_env
-
         self._cameras = {name: tuple(size) for name, size in (cameras or {}).items()}
         self._environment_state = environment_state
         self._render_camera = render_camera

@@ -7,7 +7,7 @@ from typing import Any
 
 import numpy as np
 
-from ..units import FEATURE_NAMES, JOINT_LIMITS, lerobot_from_radians, radians_from_lerobot
+from ...units import FEATURE_NAMES, JOINT_LIMITS, lerobot_from_radians, radians_from_lerobot
 
 
 def command_from_action(

@@ -4,8 +4,10 @@ lerobot_env_so101_sim (docs/lerobot.md).
 
 The config builds LeRobot's feature maps (`agent_pos` -> observation.state, `environment_state` ->
 observation.environment_state, `pixels/<camera>` -> observation.images.<camera>) and names the
-Gymnasium ids registered here, whose environment is so101.lerobot_adapter.So101LeRobotEnv. Cheap
-to import (no rclpy): LeRobot imports every plugin at the start of each of its CLIs.
+Gymnasium ids registered here, `lerobot_env_so101_sim/<task>` for every task of
+so101.contract.TASKS (episode length and task text from its facts), whose environment is
+so101.lerobot.adapter.So101LeRobotEnv. Cheap to import (no rclpy): LeRobot imports every plugin at
+the start of each of its CLIs.
 """
 
 from __future__ import annotations
@@ -17,14 +19,9 @@ from lerobot.configs.types import FeatureType, PolicyFeature
 from lerobot.envs.configs import EnvConfig
 from lerobot.utils.constants import ACTION, OBS_ENV_STATE, OBS_IMAGES, OBS_STATE
 
-from . import contract
+from .. import contract
 
 PACKAGE = "lerobot_env_so101_sim"
-# task -> (steps of an episode unless --env.episode_length, default task text of the episodes)
-TASKS = {
-    "cube_to_bin": (600, "put the cube in the bin"),
-    "touch_cube": (300, "touch the cube"),
-}
 ENVIRONMENT_STATE_SIZE = 7  # cube position (x y z, m) and orientation (w x y z), world frame
 
 
@@ -33,13 +30,15 @@ def gym_id_of(task: str) -> str:
 
 
 def register_envs() -> None:
-    for task, (steps, _text) in TASKS.items():
-        if gym_id_of(task) not in gym.registry:
+    """Registers `lerobot_env_so101_sim/<task>` for every task of the contract (importing this
+    module does), each `--env.episode_length` steps unless told: the task's episode_steps."""
+    for task in contract.TASKS.values():
+        if gym_id_of(task.name) not in gym.registry:
             gym.register(
-                gym_id_of(task),
-                entry_point="so101.lerobot_adapter:So101LeRobotEnv",
-                kwargs={"task": task},
-                max_episode_steps=steps,
+                gym_id_of(task.name),
+                entry_point="so101.lerobot.adapter:So101LeRobotEnv",
+                kwargs={"task": task.name},
+                max_episode_steps=task.episode_steps,
             )
 
 
@@ -66,8 +65,8 @@ class So101SimEnvConfig(EnvConfig):
     (names and sizes as in the dataset: observation.images.<name>)."""
 
     task: str | None = "cube_to_bin"
-    fps: int = 30
-    episode_length: int | None = None  # steps; None: 600 (cube_to_bin) or 300 (touch_cube)
+    fps: int = int(contract.CONTROL_RATE)
+    episode_length: int | None = None  # steps; None: the task's (contract.TASKS[task].episode_steps)
     cameras: dict[str, tuple[int, int]] = field(default_factory=dict)
     environment_state: bool = True  # observation.environment_state (cube pose), as the converter writes it
     task_description: str | None = None  # the episodes' task text; None: the task's default
@@ -79,8 +78,8 @@ class So101SimEnvConfig(EnvConfig):
     def __post_init__(self):
         if self.backend not in ("inprocess", "ros"):
             raise ValueError(f"so101_sim: backend {self.backend!r}, not inprocess or ros")
-        if self.task not in TASKS:
-            raise ValueError(f"so101_sim: task {self.task!r}, not one of {', '.join(TASKS)}")
+        if self.task not in contract.TASKS:
+            raise ValueError(f"so101_sim: task {self.task!r}, not one of {', '.join(contract.TASKS)}")
         for name in [*self.cameras, self.render_camera]:
             if name not in contract.CAMERA_NAMES:
                 raise ValueError(f"so101_sim: camera {name!r}, not one of {', '.join(contract.CAMERA_NAMES)}")
@@ -101,7 +100,7 @@ class So101SimEnvConfig(EnvConfig):
             "cameras": dict(self.cameras),
             "fps": self.fps,
             "environment_state": self.environment_state,
-            "task_description": self.task_description or TASKS[self.task][1],
+            "task_description": self.task_description or contract.TASKS[self.task].description,
             "lite": self.lite,
             "render_camera": self.render_camera,
             "render_size": tuple(self.render_size),

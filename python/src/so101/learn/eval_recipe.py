@@ -1,10 +1,12 @@
 """so101-learn eval POLICY: evaluate a policy over M seeded episodes: success rate with its 95 %
-interval, mean and best reward, eval_info.json (and MP4s) in --output.
+interval, mean and best reward, eval_info.json (and MP4s) in --output. The recipes evaluate
+through it too: bc its saved policy (evaluate_saved), act and diffusion theirs through
+so101-run-policy (run_policy_command). The episodes and the report are so101.eval_episodes'.
 
 Which way depends on POLICY:
   - a policy of `so101-learn bc` or `sac` (its output directory, which holds so101_learn.json, a
     checkpoint directory, or the model file itself: policy.pth, model.zip): loaded with
-    Stable-Baselines3 and evaluated in-process (so101.sim_env) with the wrappers it was trained
+    Stable-Baselines3 and evaluated in-process (so101.envs) with the wrappers it was trained
     with (flat observation, relative actions, VecNormalize statistics if it used them),
     deterministic actions; --videos films the front camera (320x240).
   - anything else (a LeRobot pretrained_model directory, a Hugging Face Hub id): handed to
@@ -24,12 +26,12 @@ from pathlib import Path
 
 import numpy as np
 
+from .. import contract
 from .recipe import recipe_parser
 from .wrappers import SETTINGS_FILE, EnvSettings
 
 VEC_NORMALIZE_FILE = "vecnormalize.pkl"
 VIDEO_CAMERA = ("front", (240, 320))
-TASKS = ["cube_to_bin", "touch_cube", "touch_cube_sparse"]
 
 
 def add_parser(subparsers, name: str) -> None:
@@ -40,7 +42,9 @@ def add_parser(subparsers, name: str) -> None:
     p.add_argument(
         "--output", default=None, help="directory for eval_info.json and videos/ (default <checkout>/eval/<policy>-<time>)"
     )
-    p.add_argument("--sim-task", choices=TASKS, default=None, help="the task (default: the policy's; LeRobot: cube_to_bin)")
+    p.add_argument(
+        "--sim-task", choices=list(contract.TASKS), default=None, help="the task (default: the policy's; LeRobot: cube_to_bin)"
+    )
     p.add_argument(
         "--episode-time", type=float, default=None, help="sim seconds before an episode counts as failed (default: the task's)"
     )
@@ -114,8 +118,7 @@ def evaluate_saved(
     quiet: bool = False,
 ) -> dict:
     """Evaluates a bc/sac policy in-process; writes output/eval_info.json, returns the summary."""
-    from ..evaluation import run_episodes, summarize, write_report
-    from ..sim_env import CONTROL_RATE
+    from ..eval_episodes import run_episodes, summarize, write_report
 
     found = find_saved(str(policy))
     if found is None:
@@ -125,7 +128,7 @@ def evaluate_saved(
     if task and task != settings.task:
         settings = dataclasses.replace(settings, task=task, episode_steps=None)
     act = load_policy(record, model, settings)
-    max_steps = int(round(episode_time * CONTROL_RATE)) if episode_time else settings.episode_steps
+    max_steps = int(round(episode_time * contract.CONTROL_RATE)) if episode_time else settings.episode_steps
     env = settings.make(flat=False, cameras=dict([VIDEO_CAMERA]) if videos else None, lite=lite)
     try:
         results = run_episodes(
@@ -136,7 +139,7 @@ def evaluate_saved(
             max_steps=max_steps,
             video_cameras=[VIDEO_CAMERA[0]] if videos else [],
             output=Path(output),
-            fps=CONTROL_RATE,
+            fps=contract.CONTROL_RATE,
             quiet=quiet,
         )
     finally:
@@ -146,10 +149,10 @@ def evaluate_saved(
         policy=str(model),
         algorithm=record["algorithm"],
         task=settings.task,
-        reward="dense" if settings.dense_reward else "sparse",
+        reward=reward_mode(settings.task, settings.dense_reward),
         backend="inprocess",
-        fps=CONTROL_RATE,
-        episode_time_s=max_steps / CONTROL_RATE,
+        fps=contract.CONTROL_RATE,
+        episode_time_s=max_steps / contract.CONTROL_RATE,
     )
     write_report(Path(output), summary, results, quiet=quiet)
     return summary
@@ -231,3 +234,10 @@ def run(args) -> int:
         quiet=args.quiet,
     )
     return 0
+
+
+def reward_mode(task: str, dense_reward: bool) -> str:
+    """The reward an episode of `task` was scored with: the dense one where asked for and offered,
+    else the task's default (its first mode)."""
+    modes = contract.TASKS[task].reward_modes
+    return "dense" if dense_reward and "dense" in modes else modes[0]

@@ -1,14 +1,15 @@
 """The ROS backend of the Gymnasium environments (`gym.make("so101/CubeToBin-v0", backend="ros")`,
-so101.sim_env): so101_sim_node in lockstep, started by the environment under a namespace of its
-own, driven through rclpy. Each action is published on /joint_commands; the node runs with
+so101.envs.registry): so101_sim_node in lockstep, started by the environment under a namespace of
+its own, driven through rclpy. Each action is published on /joint_commands; the node runs with
 --step-on-command, so that message advances exactly one control period and the state it leads to
 is published before the next command is taken (no /sim/step call, no waiting on a timer).
 Stable-Baselines3, imitation and the like then run against the stack's real interface.
 
 Must run inside the network namespace of scripts/isolated (DDS traffic stays on the machine).
-Observations, actions, rewards and info are those of so101.sim_env (the in-process backend), each
-camera rendered by the sim at the instant of the state. A seeded reset restarts the node with the
-seed (the in-process backend restarts nothing).
+Observations, actions, rewards, termination and info are those of the in-process backend
+(so101.envs.spaces, so101.envs.inprocess), each camera rendered by the sim at the instant of the
+state. A seeded reset restarts the node with the seed (the in-process backend restarts nothing).
+rclpy is imported when an env is built, not with this module.
 """
 
 from __future__ import annotations
@@ -24,11 +25,11 @@ import uuid
 import gymnasium as gym
 import numpy as np
 
-from . import contract, process
-from .messages import joint_positions, rgb_image
-from .paths import node_binary, node_environment
-from .sim_env import action_space, checked_action, observation_from_state, observation_space
-from .units import JOINT_NAMES
+from .. import contract, process
+from ..messages import joint_positions, rgb_image
+from ..paths import node_binary, node_environment
+from ..units import JOINT_NAMES
+from .spaces import action_space, checked_action, observation_from_state, observation_space, task_facts
 
 log = logging.getLogger(__name__)
 
@@ -40,18 +41,19 @@ FIRST_RESET_TIMEOUT_S = 5.0
 FIRST_RESET_ATTEMPTS = 3
 
 
-class So101SimEnv(gym.Env):
+class So101RosEnv(gym.Env):
     metadata = {"render_modes": []}
 
     def __init__(
         self,
         task: str = "cube_to_bin",
-        control_rate: float = 30.0,
+        control_rate: float | None = None,  # None: the task's
         lite: bool = True,
         timeout: float = 20.0,
         cameras: dict[str, tuple[int, int]] | None = None,
         dense_reward: bool = False,
     ):
+        facts = task_facts(task)  # an unknown task is refused before anything starts
         import rclpy
         from geometry_msgs.msg import PoseStamped
         from rclpy.experimental import EventsExecutor
@@ -62,7 +64,13 @@ class So101SimEnv(gym.Env):
         self.action_space = action_space()
         self._cameras = {name: (int(h), int(w)) for name, (h, w) in (cameras or {}).items()}
         self.observation_space = observation_space(self._cameras)
-        self._task, self._rate, self._lite, self._timeout = task, control_rate, lite, timeout
+        self._task, self._rate, self._lite, self._timeout = (
+            task,
+            facts.control_rate if control_rate is None else control_rate,
+            lite,
+            timeout,
+        )
+        self._terminates_on_success = facts.terminates_on_success
         self._dense_reward = dense_reward
         self._namespace = f"gym_{os.getpid()}_{uuid.uuid4().hex[:8]}"
         self._process: subprocess.Popen | None = None
@@ -241,7 +249,7 @@ class So101SimEnv(gym.Env):
         self._commands.publish(self._JointState(name=JOINT_NAMES, position=[float(v) for v in action]))
         observation = self._observe(counts)
         success = bool(self._latest["success"].data)
-        terminated = success and self._task == "cube_to_bin"
+        terminated = success and self._terminates_on_success
         return observation, float(self._latest["reward"].data), terminated, False, {"is_success": success}
 
     def close(self):
