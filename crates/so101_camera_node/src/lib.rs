@@ -2,12 +2,15 @@
 //! - [`request`]: `--camera NAME=DEVICE[:WIDTHxHEIGHT][@FPS]`;
 //! - [`modes`]: choosing a mode the camera offers (MJPEG first, for USB bandwidth);
 //! - [`jpeg`]: whether a buffer is a whole JPEG (a truncated one is dropped, never published);
-//! - [`clock`]: a capture instant on the monotonic clock as a ROS stamp.
+//! - [`clock`]: a capture instant on the monotonic clock as a ROS stamp;
+//! - [`device`]: the narrow interface to a camera, and [`fake`]: the in-process test camera behind
+//!   it (real MJPEG and YUYV frames of a known picture; drops, truncated frames, stalls, unplugs).
 //!
-//! The device itself (V4L2 through the `v4l` crate, and the in-process fake that tests use) comes
-//! behind a narrow trait next; these modules are what both share.
+//! The V4L2 backend (through the `v4l` crate) and the node come next.
 
 pub mod clock;
+pub mod device;
+pub mod fake;
 pub mod jpeg;
 pub mod modes;
 pub mod request;
