@@ -13,6 +13,35 @@ pub struct ClockPair {
     pub system: Duration,
 }
 
+impl ClockPair {
+    /// Both clocks read together: the system clock between two monotonic readings, of three
+    /// tries the one with the two monotonic readings closest together (a thread preempted between
+    /// the readings would otherwise shift the stamps of a frame by the preemption).
+    pub fn read(monotonic: impl Fn() -> Duration, system: impl Fn() -> Duration) -> Self {
+        let mut best: Option<(Duration, Self)> = None;
+        for _ in 0..3 {
+            let before = monotonic();
+            let system = system();
+            let after = monotonic();
+            let window = after.saturating_sub(before);
+            if best.is_none_or(|(narrowest, _)| window < narrowest) {
+                let pair = Self {
+                    monotonic: before + window / 2,
+                    system,
+                };
+                best = Some((window, pair));
+            }
+        }
+        best.map_or_else(
+            || Self {
+                monotonic: monotonic(),
+                system: system(),
+            },
+            |(_, pair)| pair,
+        )
+    }
+}
+
 /// The system-clock instant (since the Unix epoch) of `captured` on the monotonic clock, or
 /// `None` when the capture lies after the reading (a device clock that is not the monotonic
 /// one: the caller stamps the frame with the reading then, and counts it).
@@ -46,6 +75,23 @@ mod tests {
             latency(captured, NOW.monotonic),
             Some(Duration::from_millis(33))
         );
+    }
+
+    #[test]
+    fn the_reading_with_the_narrowest_window_is_kept() {
+        use std::cell::Cell;
+        // Monotonic readings: a preempted first try (5 ms between its readings), then a quick one.
+        let readings = [0_u64, 5_000, 6_000, 6_010, 7_000, 7_100];
+        let index = Cell::new(0);
+        let monotonic = || {
+            let at = readings[index.get()];
+            index.set(index.get() + 1);
+            Duration::from_micros(at)
+        };
+        let system = || Duration::from_micros(1_000_000 + readings[index.get()]);
+        let pair = ClockPair::read(monotonic, system);
+        assert_eq!(pair.monotonic, Duration::from_micros(6_005));
+        assert_eq!(pair.system, Duration::from_micros(1_006_010));
     }
 
     #[test]

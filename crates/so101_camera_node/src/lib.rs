@@ -6,11 +6,16 @@
 //! - [`device`]: the narrow interface to a camera, and [`fake`]: the in-process test camera behind
 //!   it (real MJPEG and YUYV frames of a known picture; drops, truncated frames, stalls, unplugs).
 //!
-//! The V4L2 backend (through the `v4l` crate) and the node come next.
+//! - [`node`]: the node, serving fake cameras so far; the V4L2 backend (through the `v4l` crate)
+//!   comes next.
 
+pub mod cli;
 pub mod clock;
+pub mod decode;
 pub mod device;
 pub mod fake;
 pub mod jpeg;
 pub mod modes;
+pub mod node;
 pub mod request;
+pub mod status;
