@@ -41,8 +41,6 @@ use crate::{
 const FRAME_WAIT: Duration = Duration::from_millis(500);
 /// How often a camera that went away is looked for.
 const REOPEN_EVERY: Duration = Duration::from_millis(500);
-/// The format string image_transport's compressed publisher writes for JPEG.
-const JPEG_FORMAT: &str = "rgb8; jpeg compressed bgr8";
 
 /// The device of a request.
 pub fn device_of(request: &CameraRequest) -> Result<Box<dyn CameraDevice>> {
@@ -190,7 +188,7 @@ impl CameraTopics {
         let qos = qos::default_topic();
         let topic = |leaf| topics::camera(name, leaf);
         Ok(Self {
-            frame_id: format!("{name}_camera_optical_frame"),
+            frame_id: topics::camera_optical_frame(name),
             compressed: node.publisher(&topic(topics::IMAGE_COMPRESSED), qos.clone())?,
             info: node.publisher(&topic(topics::CAMERA_INFO), qos.clone())?,
             raw: if raw {
@@ -319,7 +317,7 @@ impl Camera {
             .compressed
             .publish(CompressedImage {
                 header,
-                format: JPEG_FORMAT.into(),
+                format: topics::JPEG_FORMAT.into(),
                 data: jpeg,
             })
             .is_ok();

@@ -47,6 +47,15 @@ pub mod topics {
     pub fn camera(name: &str, leaf: &str) -> String {
         format!("{CAMERA_PREFIX}/{name}/{leaf}")
     }
+
+    /// The `format` of a JPEG on [`IMAGE_COMPRESSED`], as image_transport's compressed
+    /// publisher writes it.
+    pub const JPEG_FORMAT: &str = "rgb8; jpeg compressed bgr8";
+
+    /// The TF frame of a camera's images: its optical frame (x right, y down, z forward).
+    pub fn camera_optical_frame(name: &str) -> String {
+        format!("{name}_camera_optical_frame")
+    }
 }
 
 /// Services, relative to the namespace.

@@ -7,7 +7,10 @@ use std::{
 };
 
 use ros2_client::Publisher;
-use so101_core::ros::{qos, rate_limit::RateLimiter, RosNode};
+use so101_core::{
+    contract::topics,
+    ros::{qos, rate_limit::RateLimiter, RosNode},
+};
 use so101_msgs::{
     builtin_interfaces::Time,
     sensor_msgs::{CameraInfo, CompressedImage, Image, RegionOfInterest},
@@ -38,7 +41,7 @@ impl CameraTopics {
         let base = format!("camera/{name}");
         let qos = qos::default_topic();
         Ok(Self {
-            frame_id: optical_frame_id(name),
+            frame_id: topics::camera_optical_frame(name),
             intrinsics,
             image: node.publisher(&format!("{base}/image_raw"), qos.clone())?,
             info: node.publisher(&format!("{base}/camera_info"), qos.clone())?,
@@ -49,11 +52,6 @@ impl CameraTopics {
             },
         })
     }
-}
-
-/// TF frame of a camera's optical frame (x right, y down, z forward).
-pub fn optical_frame_id(camera: &str) -> String {
-    format!("{camera}_camera_optical_frame")
 }
 
 /// sensor_msgs/CameraInfo of an ideal pinhole camera.
@@ -123,7 +121,7 @@ pub fn publish_batches(topics: &[CameraTopics], jpeg_quality: u8, batches: &Rece
                     publisher
                         .publish(CompressedImage {
                             header,
-                            format: "rgb8; jpeg compressed bgr8".into(),
+                            format: topics::JPEG_FORMAT.into(),
                             data,
                         })
                         .is_ok()
