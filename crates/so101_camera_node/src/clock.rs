@@ -18,27 +18,26 @@ impl ClockPair {
     /// tries the one with the two monotonic readings closest together (a thread preempted between
     /// the readings would otherwise shift the stamps of a frame by the preemption).
     pub fn read(monotonic: impl Fn() -> Duration, system: impl Fn() -> Duration) -> Self {
-        let mut best: Option<(Duration, Self)> = None;
-        for _ in 0..3 {
+        let try_once = || {
             let before = monotonic();
             let system = system();
-            let after = monotonic();
-            let window = after.saturating_sub(before);
-            if best.is_none_or(|(narrowest, _)| window < narrowest) {
-                let pair = Self {
-                    monotonic: before + window / 2,
-                    system,
-                };
-                best = Some((window, pair));
-            }
-        }
-        best.map_or_else(
-            || Self {
-                monotonic: monotonic(),
-                system: system(),
-            },
-            |(_, pair)| pair,
-        )
+            let window = monotonic().saturating_sub(before);
+            let pair = Self {
+                monotonic: before + window / 2,
+                system,
+            };
+            (window, pair)
+        };
+        let first = try_once();
+        let second = try_once();
+        let third = try_once();
+        [second, third]
+            .into_iter()
+            .fold(
+                first,
+                |best, next| if next.0 < best.0 { next } else { best },
+            )
+            .1
     }
 }
 

@@ -18,7 +18,7 @@ use std::{
 
 use crate::{
     device::{monotonic_now, CameraDevice, CameraStream, CaptureError, Frame, OpenError},
-    modes::{Mode, OfferedMode, PixelFormat},
+    modes::{Mode, OfferedMode, PixelFormat, DEFAULT_FPS, DEFAULT_SIZE},
 };
 
 /// What the fake camera offers and does.
@@ -38,9 +38,9 @@ impl Default for FakeSettings {
     fn default() -> Self {
         Self {
             format: PixelFormat::Mjpeg,
-            width: 640,
-            height: 480,
-            fps: 30.0,
+            width: DEFAULT_SIZE.0,
+            height: DEFAULT_SIZE.1,
+            fps: DEFAULT_FPS,
             drop_every: None,
             truncate_every: None,
             stall: None,
