@@ -24,6 +24,7 @@ from pathlib import Path
 import numpy as np
 
 from . import contract
+from .envs.spaces import reward_mode
 from .messages import cube_pose_vector, joint_positions, rgb_image
 from .policy import PolicyError, StackPolicy
 from .rclpy_wait import spin_until
@@ -304,7 +305,7 @@ def main(argv: list[str] | None = None) -> int:
     if args.episode_time <= 0:
         raise SystemExit("so101-run-policy: --episode-time must be positive")
     modes = contract.TASKS[args.sim_task].reward_modes
-    args.reward = args.reward or ("dense" if "dense" in modes else modes[0])
+    args.reward = args.reward or reward_mode(args.sim_task, dense_reward=True)
     if args.reward not in modes:
         raise SystemExit(f"so101-run-policy: {args.sim_task} has no {args.reward} reward (it offers: {', '.join(modes)})")
     try:

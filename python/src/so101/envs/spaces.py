@@ -28,6 +28,13 @@ def task_facts(task: str) -> contract.Task:
         raise ValueError(f"task {task!r}: one of {', '.join(contract.TASKS)}") from None
 
 
+def reward_mode(task: str, dense_reward: bool) -> str:
+    """The reward an episode of `task` is scored with: the dense one where asked for and offered,
+    else the task's default (its first mode)."""
+    modes = task_facts(task).reward_modes
+    return "dense" if dense_reward and "dense" in modes else modes[0]
+
+
 def observation_space(cameras: dict[str, tuple[int, int]]) -> spaces.Dict:
     space = {
         "agent_pos": spaces.Box(-np.inf, np.inf, shape=(6,), dtype=np.float64),

@@ -27,6 +27,7 @@ from pathlib import Path
 import numpy as np
 
 from .. import contract
+from ..envs.spaces import reward_mode
 from .recipe import recipe_parser
 from .wrappers import SETTINGS_FILE, EnvSettings
 
@@ -234,10 +235,3 @@ def run(args) -> int:
         quiet=args.quiet,
     )
     return 0
-
-
-def reward_mode(task: str, dense_reward: bool) -> str:
-    """The reward an episode of `task` was scored with: the dense one where asked for and offered,
-    else the task's default (its first mode)."""
-    modes = contract.TASKS[task].reward_modes
-    return "dense" if dense_reward and "dense" in modes else modes[0]
