@@ -132,7 +132,12 @@ def run(*args: str) -> subprocess.CompletedProcess:
 @pytest.mark.parametrize(
     ("args", "says"),
     [
-        (["--camera", "top=/dev/video7"], "no V4L2 backend"),
+        (["--camera", "top=/dev/video77"], "--camera top: no camera at /dev/video77"),
+        (["--camera", "top=fake:", "--control", "top.exposure=99999"], "exposure 99999 is outside the camera's 1..=5000"),
+        (["--camera", "top=fake:", "--control", "top.focus=10"], "the camera has no focus control"),
+        (["--camera", "top=fake:", "--control", "wrist.gain=10"], "no --camera wrist"),
+        (["--camera", "top=fake:", "--control", "top.gain=auto"], "gain has no automatic mode"),
+        (["--camera", "top=fake:", "--calibration", "top=/nonexistent.yaml"], "--calibration top=/nonexistent.yaml"),
         (["--camera", "top=fake:hdr"], "not understood"),
         (["--camera", "top"], "NAME=DEVICE"),
         ([], "--camera"),
@@ -143,7 +148,133 @@ def test_bad_cameras_are_refused_with_the_reason(args, says):
     assert done.returncode != 0 and says in done.stderr, done.stderr
 
 
+def test_a_calibration_of_another_size_or_shape_is_refused(tmp_path):
+    wrong_size = tmp_path / "wrong_size.yaml"
+    wrong_size.write_text(calibration_yaml(1280, 720))
+    done = run("--camera", "top=fake:", "--calibration", f"top={wrong_size}")
+    assert done.returncode != 0 and "the calibration is of 1280x720 images, the camera streams 640x480" in done.stderr, (
+        done.stderr
+    )
+    malformed = tmp_path / "malformed.yaml"
+    malformed.write_text(calibration_yaml(640, 480).replace("rows: 3\n  cols: 4", "rows: 4\n  cols: 4"))
+    done = run("--camera", "top=fake:", "--calibration", f"top={malformed}")
+    assert done.returncode != 0 and "projection_matrix is 4x4" in done.stderr, done.stderr
+
+
+def test_list_without_cameras_lists_this_machine_s_video_devices():
+    from pathlib import Path
+
+    done = run("--list")
+    assert done.returncode == 0, done.stderr
+    devices = sorted(Path("/dev").glob("video*"))
+    if devices:
+        assert str(devices[0]) in done.stdout, done.stdout
+    else:
+        assert "no video device" in done.stdout, done.stdout
+
+
 def test_list_prints_the_modes_a_camera_offers():
     done = run("--list", "--camera", "top=fake:yuyv,320x240@15")
     assert done.returncode == 0, done.stderr
     assert "top=fake:yuyv,320x240@15: YUYV 320x240@15,7.5" in done.stdout, done.stdout
+
+
+def calibration_yaml(width: int, height: int) -> str:
+    """A calibration file as ROS's camera_calibration writes it (ost.yaml)."""
+    return f"""image_width: {width}
+image_height: {height}
+camera_name: top
+camera_matrix:
+  rows: 3
+  cols: 3
+  data: [61.25, 0, 31.5, 0, 61.5, 23.5, 0, 0, 1]
+distortion_model: plumb_bob
+distortion_coefficients:
+  rows: 1
+  cols: 5
+  data: [0.11, -0.24, 0.001, -0.002, 0]
+rectification_matrix:
+  rows: 3
+  cols: 3
+  data: [1, 0, 0, 0, 1, 0, 0, 0, 1]
+projection_matrix:
+  rows: 3
+  cols: 4
+  data: [62.0, 0, 31.0, 0, 0, 62.5, 23.0, 0, 0, 0, 1, 0]
+"""
+
+
+def test_camera_info_carries_the_calibration_file_s_matrices(ros, tmp_path):
+    from sensor_msgs.msg import CameraInfo
+
+    calibration = tmp_path / "top.yaml"
+    calibration.write_text(calibration_yaml(64, 48))
+    node = start(tmp_path, "top=fake:64x48@30", extra=("--calibration", f"top={calibration}"))
+    try:
+        info = ros.subscribe("/camera/top/camera_info", CameraInfo, reliable_qos(10))
+        message = info.wait_count(1, 20.0, node)[-1]
+        assert (message.width, message.height) == (64, 48)
+        assert message.distortion_model == "plumb_bob"
+        assert list(message.d) == pytest.approx([0.11, -0.24, 0.001, -0.002, 0.0])
+        assert list(message.k) == pytest.approx([61.25, 0, 31.5, 0, 61.5, 23.5, 0, 0, 1])
+        assert list(message.p) == pytest.approx([62.0, 0, 31.0, 0, 0, 62.5, 23.0, 0, 0, 0, 1, 0])
+    finally:
+        assert node.stop() == 0, node.log_tail()
+
+
+def test_image_controls_are_parameters_set_at_start_and_at_run_time_and_kept_over_an_unplug(ros, tmp_path):
+    from diagnostic_msgs.msg import DiagnosticArray
+    from parameter_peer import ParameterPeer
+
+    node = start(
+        tmp_path,
+        "top=fake:32x24@30,unplug_at=300:2",
+        extra=("--control", "top.exposure=156", "--control", "top.white_balance=4000"),
+    )
+    try:
+        diagnostics = ros.subscribe("/diagnostics", DiagnosticArray, reliable_qos(100))
+
+        def controls() -> dict[str, str]:
+            latest = diagnostics.latest()
+            status = camera_status(latest, "top") if latest is not None else None
+            return {kv.key: kv.value for kv in status.values} if status is not None else {}
+
+        wait_until(lambda: controls().get("exposure") == "156", 20.0, "the start exposure on /diagnostics", node)
+        assert controls()["white_balance"] == "4000" and controls()["gain"] == "32", controls()
+        peer = ParameterPeer(ros, "/so101_camera_node", node)
+        assert peer.get("top.exposure", "top.gain", "top.white_balance") == [156, 32, 4000]
+        assert "top.focus" not in peer.names(), "the fake camera has no focus control"
+        # At run time: automatic exposure, a manual gain; a gain outside the camera's range is refused.
+        results = peer.set(**{"top.exposure": -1, "top.gain": 50})
+        assert all(result.successful for result in results), results
+        refused = peer.set(**{"top.gain": 500})[0]
+        assert not refused.successful and "100" in refused.reason, refused
+        wait_until(
+            lambda: controls().get("exposure") == "-1" and controls().get("gain") == "50",
+            10.0,
+            "the new controls on /diagnostics",
+            node,
+        )
+        assert controls()["unplugs"] == "0", "the camera went away before the run-time settings were seen"
+        # The fake forgets its controls when unplugged (as a camera does); the node sets them again.
+        wait_until(
+            lambda: controls().get("unplugs") == "1" and controls().get("mode", "").startswith("MJPG"),
+            20.0,
+            "the camera back after its unplug",
+            node,
+        )
+        wait_until(lambda: controls().get("gain") == "50", 10.0, "the gain set again after the unplug", node)
+        assert controls()["exposure"] == "-1" and controls()["white_balance"] == "4000", controls()
+        node.assert_alive()
+    finally:
+        assert node.stop() == 0, node.log_tail()
+
+
+def test_wait_waits_for_a_camera_that_is_not_plugged_in(tmp_path):
+    node = start(tmp_path, f"top={tmp_path / 'video9'}", extra=("--wait",))
+    try:
+        wait_until(lambda: "waiting for the camera" in node.log_tail(), 20.0, "the wait in the log", node)
+        time.sleep(1.0)
+        node.assert_alive()
+    finally:
+        assert node.stop() == 0, node.log_tail()

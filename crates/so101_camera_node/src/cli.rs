@@ -1,8 +1,10 @@
 //! Command-line options of so101_camera_node.
 
+use std::path::PathBuf;
+
 use so101_core::ros::NodeArgs;
 
-use crate::request::CameraRequest;
+use crate::{controls::ControlRequest, request::CameraRequest};
 
 /// Real cameras as ROS image topics: each `--camera NAME=DEVICE` publishes the camera's own JPEG
 /// frames unchanged on camera/NAME/image_raw/compressed (sensor_msgs/CompressedImage), its
@@ -16,13 +18,26 @@ pub struct Args {
     /// path, an index, or fake:SETTINGS (repeatable).
     #[arg(long = "camera", required_unless_present = "list")]
     pub cameras: Vec<CameraRequest>,
+    /// An image control set at start: CAMERA.KEY=VALUE, KEY exposure (100 µs units), gain,
+    /// white_balance (K) or focus, VALUE a number or auto (repeatable); each is also the
+    /// parameter CAMERA.KEY.
+    #[arg(long = "control")]
+    pub controls: Vec<ControlRequest>,
+    /// A camera's calibration: NAME=FILE, the YAML file ROS's camera_calibration writes; its
+    /// matrices go out in camera_info (repeatable).
+    #[arg(long = "calibration", value_parser = parse_calibration)]
+    pub calibrations: Vec<(String, PathBuf)>,
+    /// Wait for a camera that is not plugged in yet instead of refusing to start.
+    #[arg(long)]
+    pub wait: bool,
     /// Also publish rgb8 frames on camera/NAME/image_raw (decoded from the JPEG).
     #[arg(long)]
     pub raw: bool,
     /// JPEG quality of the frames of YUYV-only cameras, 1-100.
     #[arg(long, default_value_t = 90, value_parser = clap::value_parser!(u8).range(1..=100))]
     pub jpeg_quality: u8,
-    /// Print each --camera's modes (formats, sizes, rates) and exit.
+    /// Print the modes (formats, sizes, rates) of each --camera, or of every camera of this
+    /// machine with their stable names, and exit.
     #[arg(long)]
     pub list: bool,
     /// Exit cleanly after this many seconds.
@@ -30,4 +45,12 @@ pub struct Args {
     pub duration: Option<f64>,
     #[command(flatten)]
     pub node: NodeArgs,
+}
+
+fn parse_calibration(text: &str) -> Result<(String, PathBuf), String> {
+    let (name, file) = text
+        .split_once('=')
+        .filter(|(name, file)| !name.is_empty() && !file.is_empty())
+        .ok_or_else(|| format!("--calibration {text:?}: expected NAME=FILE"))?;
+    Ok((name.to_owned(), PathBuf::from(file)))
 }

@@ -4,7 +4,10 @@
 
 use std::time::Duration;
 
-use crate::modes::{Mode, OfferedMode, PixelFormat};
+use crate::{
+    controls::{ControlKind, ControlState, Setting},
+    modes::{Mode, OfferedMode, PixelFormat},
+};
 
 /// One captured frame, as the device delivered it.
 #[derive(Debug, Clone, PartialEq)]
@@ -28,6 +31,9 @@ pub enum CaptureError {
     /// The device went away (unplugged): the stream is over; reopen when it returns.
     #[error("the camera is gone: {0}")]
     Gone(String),
+    /// The device delivered a frame it marks as corrupted (V4L2_BUF_FLAG_ERROR): dropped, counted.
+    #[error("a damaged frame: {0}")]
+    Damaged(String),
 }
 
 #[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
@@ -50,6 +56,10 @@ pub trait CameraDevice: Send {
 pub trait CameraStream: Send {
     /// The next frame, waiting at most `timeout`.
     fn next_frame(&mut self, timeout: Duration) -> Result<Frame, CaptureError>;
+    /// The image controls the camera has, with their ranges and settings now.
+    fn controls(&mut self) -> Vec<ControlState>;
+    /// Sets one control to a setting its [`ControlState::check`] accepts.
+    fn set_control(&mut self, kind: ControlKind, setting: Setting) -> Result<(), String>;
 }
 
 /// Now on CLOCK_MONOTONIC, the clock of V4L2 buffer timestamps.

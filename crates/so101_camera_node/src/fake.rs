@@ -8,6 +8,10 @@
 //! - `stall_at=K:SECONDS`: after frame K, no frame for SECONDS;
 //! - `unplug_at=K:SECONDS`: after frame K, the camera is gone for SECONDS, then back.
 //!
+//! Its image controls: exposure (1..=5000, automatic at first), gain (0..=100, 32 at first) and
+//! white balance (2800..=6500 K, automatic at first); no focus control, as many webcams. Like a
+//! real camera it forgets their settings when it is unplugged.
+//!
 //! The picture of frame `sequence` ([`picture`]): red rises left to right, green top to bottom,
 //! blue is `sequence * 8 mod 256` everywhere, so a subscriber can tell which frame it got.
 
@@ -17,6 +21,7 @@ use std::{
 };
 
 use crate::{
+    controls::{ControlKind, ControlState, Setting},
     device::{monotonic_now, CameraDevice, CameraStream, CaptureError, Frame, OpenError},
     modes::{Mode, OfferedMode, PixelFormat, DEFAULT_FPS, DEFAULT_SIZE},
 };
@@ -192,6 +197,7 @@ impl CameraDevice for FakeCamera {
             start: monotonic_now(),
             next: 0,
             pause_until: None,
+            controls: fake_controls(),
         }))
     }
 }
@@ -203,6 +209,23 @@ struct FakeStream {
     start: Duration,
     next: u32,
     pause_until: Option<Duration>,
+    controls: Vec<ControlState>,
+}
+
+/// The fake's controls as it powers up.
+fn fake_controls() -> Vec<ControlState> {
+    let control = |kind, minimum, maximum, has_auto, setting| ControlState {
+        kind,
+        minimum,
+        maximum,
+        has_auto,
+        setting,
+    };
+    vec![
+        control(ControlKind::Exposure, 1, 5000, true, Setting::Auto),
+        control(ControlKind::Gain, 0, 100, false, Setting::Manual(32)),
+        control(ControlKind::WhiteBalance, 2800, 6500, true, Setting::Auto),
+    ]
 }
 
 impl FakeStream {
@@ -273,6 +296,21 @@ impl CameraStream for FakeStream {
         }
         self.next += 1;
         Ok(frame)
+    }
+
+    fn controls(&mut self) -> Vec<ControlState> {
+        self.controls.clone()
+    }
+
+    fn set_control(&mut self, kind: ControlKind, setting: Setting) -> Result<(), String> {
+        let control = self
+            .controls
+            .iter_mut()
+            .find(|control| control.kind == kind)
+            .ok_or_else(|| format!("the camera has no {kind} control"))?;
+        control.check(setting)?;
+        control.setting = setting;
+        Ok(())
     }
 }
 

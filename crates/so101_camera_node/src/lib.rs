@@ -1,4 +1,4 @@
-//! Real cameras as ROS image topics (issue 29), built from the parts that need no device first:
+//! Real cameras as ROS image topics (issue 29). The parts that need no device:
 //! - [`request`]: `--camera NAME=DEVICE[:WIDTHxHEIGHT][@FPS]`;
 //! - [`modes`]: choosing a mode the camera offers (MJPEG first, for USB bandwidth);
 //! - [`jpeg`]: whether a buffer is a whole JPEG (a truncated one is dropped, never published);
@@ -6,16 +6,25 @@
 //! - [`device`]: the narrow interface to a camera, and [`fake`]: the in-process test camera behind
 //!   it (real MJPEG and YUYV frames of a known picture; drops, truncated frames, stalls, unplugs).
 //!
-//! - [`node`]: the node, serving fake cameras so far; the V4L2 backend (through the `v4l` crate)
-//!   comes next.
+//! - [`controls`]: exposure, gain, white balance and focus as parameters and V4L2 controls;
+//! - [`calibration`]: camera_info from a camera_calibration YAML file;
+//!
+//! The devices: [`v4l2`] (USB cameras through the `v4l` crate; [`v4l2::mapping`] and
+//! [`v4l2::discovery`] are its pure parts). The node: [`node`] (start, parameters, diagnostics)
+//! and [`camera`] (one camera's thread); [`messages`], [`status`] and [`decode`] serve them.
 
+pub mod calibration;
+pub mod camera;
 pub mod cli;
 pub mod clock;
+pub mod controls;
 pub mod decode;
 pub mod device;
 pub mod fake;
 pub mod jpeg;
+pub mod messages;
 pub mod modes;
 pub mod node;
 pub mod request;
 pub mod status;
+pub mod v4l2;

@@ -1,81 +1,158 @@
-//! The node: one thread per camera turns its frames into messages; the main thread serves the
-//! parameters and reports /diagnostics once a second until shutdown.
+//! The node: every camera is opened (or refused) before it starts; then one thread per camera
+//! ([`crate::camera`]) turns frames into messages while the main thread serves the parameters,
+//! hands control changes to the cameras and reports /diagnostics once a second until shutdown.
 
 use std::{
-    sync::{Arc, Mutex, PoisonError},
+    collections::BTreeMap,
+    fs,
+    path::Path,
+    sync::{
+        mpsc::{channel, Sender},
+        Arc, Mutex, PoisonError,
+    },
     thread,
-    time::{Duration, Instant, SystemTime, UNIX_EPOCH},
+    time::{Duration, Instant},
 };
 
 use anyhow::{bail, Context as _, Result};
-use ros2_client::Publisher;
 use so101_core::{
     contract::topics,
     ros::{
-        parameters::{Options, ParameterServer, Parameters, Value},
+        parameters::{Declaration, Options, ParameterServer, Parameters, Value},
         qos,
         shutdown::Shutdown,
         RosNode,
     },
 };
-use so101_msgs::{
-    builtin_interfaces::Time,
-    diagnostic_msgs::DiagnosticArray,
-    sensor_msgs::{CameraInfo, CompressedImage, Image, RegionOfInterest},
-    std_msgs::Header,
-};
+use so101_msgs::{diagnostic_msgs::DiagnosticArray, std_msgs::Header};
 
 use crate::{
+    calibration::{self, Intrinsics},
+    camera::{self, Camera, CameraTopics},
     cli::Args,
-    clock::{system_time_of, ClockPair},
-    decode::{jpeg_from_rgb, rgb_from_jpeg, rgb_from_yuyv},
-    device::{monotonic_now, CameraDevice, CameraStream, CaptureError, Frame},
+    controls::{ControlKind, ControlState, Setting, AUTO},
+    device::CameraDevice,
     fake::FakeCamera,
-    jpeg::whole_jpeg,
-    modes::{self, Mode, PixelFormat},
+    messages::{now_since_epoch, stamp_of},
+    modes,
     request::{CameraRequest, DeviceName},
     status::{diagnostic, CameraStatus},
+    v4l2::{discovery, V4l2Camera},
 };
 
-/// How long a wait for a frame lasts before it counts as a stall (and shutdown is checked).
-const FRAME_WAIT: Duration = Duration::from_millis(500);
-/// How often a camera that went away is looked for.
-const REOPEN_EVERY: Duration = Duration::from_millis(500);
+/// How often a camera that is not plugged in yet is looked for (--wait).
+const WAIT_POLL: Duration = Duration::from_millis(250);
 
-/// The device of a request.
-pub fn device_of(request: &CameraRequest) -> Result<Box<dyn CameraDevice>> {
-    match &request.device {
+/// The device of a request: a missing device node is refused with the cameras that exist, or
+/// waited for with `wait`.
+pub fn device_of(
+    request: &CameraRequest,
+    wait: Option<&Shutdown>,
+) -> Result<Box<dyn CameraDevice>> {
+    let path = match &request.device {
         DeviceName::Fake(settings) => {
             let settings = settings
                 .parse()
                 .map_err(|error: String| anyhow::anyhow!("--camera {}: {error}", request.name))?;
-            Ok(Box::new(FakeCamera::new(settings)))
+            return Ok(Box::new(FakeCamera::new(settings)));
         }
-        device => bail!(
-            "--camera {}={device}: this build has no V4L2 backend yet (issue 29); only fake: \
-             test cameras can be served",
-            request.name
-        ),
+        device => device.path().unwrap_or_default(),
+    };
+    if !path.exists() {
+        let Some(shutdown) = wait else {
+            bail!(
+                "--camera {}: {}",
+                request.name,
+                discovery::missing_message(&path, &discovery::video_nodes())
+            );
+        };
+        tracing::info!(camera = %request.name, device = %path.display(), "waiting for the camera to be plugged in");
+        while !path.exists() {
+            if shutdown.is_requested() {
+                bail!("stopped while waiting for {}", path.display());
+            }
+            thread::sleep(WAIT_POLL);
+        }
+    }
+    Ok(Box::new(V4l2Camera::new(path)))
+}
+
+/// `--list` without cameras: every video device of this machine, with its modes.
+fn list_machine() {
+    let nodes = discovery::video_nodes();
+    if nodes.is_empty() {
+        println!("no video device (/dev/video*) on this machine");
+    }
+    for node in nodes {
+        let modes = V4l2Camera::new(node.path.clone())
+            .modes()
+            .map_or_else(|error| error.to_string(), |offered| modes::list(&offered));
+        println!("{}: {modes}", discovery::describe(&node));
     }
 }
 
-/// Opens a camera in the mode its request asks for, or says why not (the modes it offers).
-fn open(
-    device: &mut dyn CameraDevice,
-    request: &CameraRequest,
-) -> Result<(Mode, Box<dyn CameraStream>)> {
-    let offered = device.modes()?;
-    let mode = modes::choose(&offered, request.size, request.fps)
-        .with_context(|| format!("--camera {}", request.name))?;
-    Ok((mode, device.open(mode)?))
+/// The calibrations named on the command line, each checked against the cameras.
+fn calibrations(args: &Args) -> Result<BTreeMap<String, Intrinsics>> {
+    let mut found = BTreeMap::new();
+    for (name, file) in &args.calibrations {
+        if !args.cameras.iter().any(|request| &request.name == name) {
+            bail!(
+                "--calibration {name}={}: no --camera {name}",
+                file.display()
+            );
+        }
+        let intrinsics = read_calibration(file)
+            .with_context(|| format!("--calibration {name}={}", file.display()))?;
+        found.insert(name.clone(), intrinsics);
+    }
+    Ok(found)
+}
+
+fn read_calibration(file: &Path) -> Result<Intrinsics> {
+    let text = fs::read_to_string(file)?;
+    calibration::parse(&text).map_err(anyhow::Error::msg)
+}
+
+/// The control settings asked for at start, per camera.
+fn start_settings(args: &Args) -> Result<BTreeMap<String, BTreeMap<ControlKind, Setting>>> {
+    let mut settings: BTreeMap<String, BTreeMap<ControlKind, Setting>> = BTreeMap::new();
+    for control in &args.controls {
+        if !args
+            .cameras
+            .iter()
+            .any(|request| request.name == control.camera)
+        {
+            bail!(
+                "--control {}.{}: no --camera {}",
+                control.camera,
+                control.kind,
+                control.camera
+            );
+        }
+        settings
+            .entry(control.camera.clone())
+            .or_default()
+            .insert(control.kind, control.setting);
+    }
+    Ok(settings)
 }
 
 pub fn run(args: Args) -> Result<()> {
-    let mut devices = args
+    if args.list && args.cameras.is_empty() {
+        list_machine();
+        return Ok(());
+    }
+    let shutdown = Shutdown::on_signals().context("cannot install the signal handlers")?;
+    let devices = args
         .cameras
         .iter()
-        .map(device_of)
-        .collect::<Result<Vec<_>>>()?;
+        .map(|request| device_of(request, args.wait.then_some(&shutdown)))
+        .collect::<Result<Vec<_>>>();
+    // Stopped while waiting for a camera (--wait): a clean exit.
+    let mut devices = match devices {
+        Err(_) if shutdown.is_requested() => return Ok(()),
+        devices => devices?,
+    };
     if args.list {
         for (request, device) in args.cameras.iter().zip(&mut devices) {
             println!(
@@ -87,20 +164,39 @@ pub fn run(args: Args) -> Result<()> {
         }
         return Ok(());
     }
-    // Every camera opens (or is refused) before the node starts.
-    let mut streams = Vec::new();
+    let mut intrinsics = calibrations(&args)?;
+    let mut settings = start_settings(&args)?;
+    // Every camera opens in its mode with its controls set (or is refused) before the node starts.
+    let mut opened = Vec::new();
     for (request, device) in args.cameras.iter().zip(&mut devices) {
-        let (mode, stream) = open(device.as_mut(), request)?;
-        tracing::info!(camera = %request.name, device = %request.device, %mode, "camera open");
-        streams.push((mode, stream));
+        let camera_settings = settings.remove(&request.name).unwrap_or_default();
+        let (mode, mut stream) = camera::open(device.as_mut(), request, &camera_settings)?;
+        let calibration = intrinsics.remove(&request.name);
+        if let Some(calibration) = &calibration {
+            calibration
+                .check_size(mode.width, mode.height)
+                .map_err(anyhow::Error::msg)
+                .with_context(|| format!("--calibration {}", request.name))?;
+        }
+        let controls = stream.controls();
+        tracing::info!(camera = %request.name, device = %request.device, %mode, calibrated = calibration.is_some(), "camera open");
+        opened.push((mode, stream, calibration, camera_settings, controls));
     }
-    let shutdown = Shutdown::on_signals().context("cannot install the signal handlers")?;
     let mut node = RosNode::start("so101_camera_node", &args.node)?;
-    let _parameters = ParameterServer::start(&mut node, declarations(&args))?;
+    let camera_controls: Vec<(&str, &[ControlState])> = args
+        .cameras
+        .iter()
+        .zip(&opened)
+        .map(|(request, (.., controls))| (request.name.as_str(), controls.as_slice()))
+        .collect();
+    let parameters = ParameterServer::start(&mut node, declarations(&args, &camera_controls))?;
     let diagnostics = node.publisher::<DiagnosticArray>(topics::DIAGNOSTICS, qos::reliable(10))?;
     let mut workers = Vec::new();
     let mut statuses = Vec::new();
-    for ((request, device), (mode, stream)) in args.cameras.iter().zip(devices).zip(streams) {
+    let mut control_senders: BTreeMap<String, Sender<(ControlKind, Setting)>> = BTreeMap::new();
+    for ((request, device), (mode, stream, calibration, camera_settings, _)) in
+        args.cameras.iter().zip(devices).zip(opened)
+    {
         let status = Arc::new(Mutex::new(CameraStatus {
             name: request.name.clone(),
             device: request.device.to_string(),
@@ -108,11 +204,16 @@ pub fn run(args: Args) -> Result<()> {
             streaming: true,
             ..CameraStatus::default()
         }));
+        let (sender, control_changes) = channel();
+        control_senders.insert(request.name.clone(), sender);
         let camera = Camera {
             topics: CameraTopics::advertise(&mut node, &request.name, args.raw)?,
             request: request.clone(),
             device,
             jpeg_quality: args.jpeg_quality,
+            intrinsics: calibration,
+            settings: camera_settings,
+            control_changes,
             status: Arc::clone(&status),
             shutdown: shutdown.clone(),
         };
@@ -125,6 +226,9 @@ pub fn run(args: Args) -> Result<()> {
     let mut last_report = Instant::now();
     while !shutdown.is_requested() && deadline.is_none_or(|deadline| Instant::now() < deadline) {
         thread::sleep(Duration::from_millis(50));
+        for change in parameters.changes() {
+            forward_control_change(&change.name, &change.value, &control_senders);
+        }
         let elapsed = last_report.elapsed();
         if elapsed < Duration::from_secs(1) {
             continue;
@@ -160,205 +264,62 @@ pub fn run(args: Args) -> Result<()> {
     Ok(())
 }
 
-/// The node's parameters: its options, read-only.
-pub fn declarations(args: &Args) -> Parameters {
+/// Hands a changed `CAMERA.KEY` parameter to its camera's thread.
+fn forward_control_change(
+    name: &str,
+    value: &Value,
+    senders: &BTreeMap<String, Sender<(ControlKind, Setting)>>,
+) {
+    let Some((camera, key)) = name.rsplit_once('.') else {
+        return;
+    };
+    let kind = ControlKind::ALL.into_iter().find(|kind| kind.key() == key);
+    if let (Some(kind), Some(sender), Value::Integer(value)) = (kind, senders.get(camera), value) {
+        let _ = sender.send((kind, Setting::from_parameter(*value)));
+    }
+}
+
+/// The node's parameters: its options, read-only, and each camera's image controls, which may be
+/// changed while it runs.
+pub fn declarations(args: &Args, camera_controls: &[(&str, &[ControlState])]) -> Parameters {
     let options = Options::of::<Args>();
+    let joined = |items: Vec<String>| Value::StringArray(items);
     let cameras = args
         .cameras
         .iter()
         .map(|request| format!("{}={}", request.name, request.device))
         .collect();
-    Parameters::new([
-        options.declare("camera", Value::StringArray(cameras)),
+    let calibrations = args
+        .calibrations
+        .iter()
+        .map(|(name, file)| format!("{name}={}", file.display()))
+        .collect();
+    let mut declared = vec![
+        options.declare("camera", joined(cameras)),
+        options.declare("calibration", joined(calibrations)),
         options.declare("raw", Value::Bool(args.raw)),
         options.declare("jpeg_quality", Value::Integer(i64::from(args.jpeg_quality))),
-    ])
+    ];
+    for (camera, controls) in camera_controls {
+        declared.extend(
+            controls
+                .iter()
+                .map(|state| control_declaration(camera, state)),
+        );
+    }
+    Parameters::new(declared)
 }
 
-/// One camera's topics.
-struct CameraTopics {
-    frame_id: String,
-    compressed: Publisher<CompressedImage>,
-    info: Publisher<CameraInfo>,
-    raw: Option<Publisher<Image>>,
-}
-
-impl CameraTopics {
-    fn advertise(node: &mut RosNode, name: &str, raw: bool) -> Result<Self> {
-        let qos = qos::default_topic();
-        let topic = |leaf| topics::camera(name, leaf);
-        Ok(Self {
-            frame_id: topics::camera_optical_frame(name),
-            compressed: node.publisher(&topic(topics::IMAGE_COMPRESSED), qos.clone())?,
-            info: node.publisher(&topic(topics::CAMERA_INFO), qos.clone())?,
-            raw: if raw {
-                Some(node.publisher(&topic(topics::IMAGE_RAW), qos)?)
-            } else {
-                None
-            },
-        })
-    }
-}
-
-/// A camera's thread.
-struct Camera {
-    topics: CameraTopics,
-    request: CameraRequest,
-    device: Box<dyn CameraDevice>,
-    jpeg_quality: u8,
-    status: Arc<Mutex<CameraStatus>>,
-    shutdown: Shutdown,
-}
-
-impl Camera {
-    fn status(&self) -> std::sync::MutexGuard<'_, CameraStatus> {
-        self.status.lock().unwrap_or_else(PoisonError::into_inner)
-    }
-
-    /// Streams until shutdown; a camera that goes away is reopened when it comes back.
-    fn serve(mut self, mut stream: Box<dyn CameraStream>) {
-        let mut last_sequence: Option<u32> = None;
-        while !self.shutdown.is_requested() {
-            match stream.next_frame(FRAME_WAIT) {
-                Ok(frame) => {
-                    if let Some(last) = last_sequence {
-                        let missed = frame.sequence.wrapping_sub(last).saturating_sub(1);
-                        self.status().device_drops += u64::from(missed);
-                    }
-                    last_sequence = Some(frame.sequence);
-                    self.publish(&frame);
-                }
-                Err(CaptureError::Timeout(_)) => self.status().timeouts += 1,
-                Err(CaptureError::Gone(reason)) => {
-                    tracing::warn!(camera = %self.request.name, %reason, "camera gone: reopening when it returns");
-                    {
-                        let mut status = self.status();
-                        status.unplugs += 1;
-                        status.streaming = false;
-                        status.state = format!("gone ({reason}): reopening when it returns");
-                    }
-                    let Some((mode, reopened)) = self.reopen() else {
-                        return;
-                    };
-                    (stream, last_sequence) = (reopened, None);
-                    tracing::info!(camera = %self.request.name, %mode, "camera back");
-                    let mut status = self.status();
-                    status.streaming = true;
-                    status.state = mode.to_string();
-                }
-            }
-        }
-    }
-
-    fn reopen(&mut self) -> Option<(Mode, Box<dyn CameraStream>)> {
-        while !self.shutdown.is_requested() {
-            if let Ok(opened) = open(self.device.as_mut(), &self.request) {
-                return Some(opened);
-            }
-            thread::sleep(REOPEN_EVERY);
-        }
-        None
-    }
-
-    fn publish(&self, frame: &Frame) {
-        let (jpeg, rgb) = match frame.format {
-            PixelFormat::Mjpeg => {
-                let Some(jpeg) = whole_jpeg(&frame.data) else {
-                    self.status().broken_frames += 1;
-                    return;
-                };
-                let rgb = self
-                    .topics
-                    .raw
-                    .as_ref()
-                    .map(|_| rgb_from_jpeg(jpeg, frame.width, frame.height));
-                (Ok(jpeg.to_vec()), rgb)
-            }
-            PixelFormat::Yuyv => {
-                let rgb = rgb_from_yuyv(&frame.data);
-                let jpeg = jpeg_from_rgb(&rgb, frame.width, frame.height, self.jpeg_quality);
-                (jpeg, Some(Ok(rgb)))
-            }
-        };
-        let (jpeg, rgb) = match (jpeg, rgb.transpose()) {
-            (Ok(jpeg), Ok(rgb)) => (jpeg, rgb),
-            (Err(error), _) | (_, Err(error)) => {
-                tracing::debug!(camera = %self.request.name, %error, "a frame that does not decode");
-                self.status().broken_frames += 1;
-                return;
-            }
-        };
-        let now = ClockPair::read(monotonic_now, now_since_epoch);
-        let captured = system_time_of(frame.captured, now).unwrap_or(now.system);
-        let header = Header {
-            stamp: stamp_of(captured),
-            frame_id: self.topics.frame_id.clone(),
-        };
-        let mut ok = self
-            .topics
-            .info
-            .publish(uncalibrated_info(header.clone(), frame.width, frame.height))
-            .is_ok();
-        if let (Some(publisher), Some(rgb)) = (&self.topics.raw, rgb) {
-            ok &= publisher
-                .publish(Image {
-                    header: header.clone(),
-                    height: frame.height,
-                    width: frame.width,
-                    encoding: "rgb8".into(),
-                    is_bigendian: 0,
-                    step: 3 * frame.width,
-                    data: rgb,
-                })
-                .is_ok();
-        }
-        ok &= self
-            .topics
-            .compressed
-            .publish(CompressedImage {
-                header,
-                format: topics::JPEG_FORMAT.into(),
-                data: jpeg,
-            })
-            .is_ok();
-        let mut status = self.status();
-        status.frames += 1;
-        status.latency_ms = monotonic_now().saturating_sub(frame.captured).as_secs_f64() * 1e3;
-        if !ok {
-            tracing::debug!(camera = %self.request.name, "publishing a frame failed");
-        }
-    }
-}
-
-/// CameraInfo of a camera without a calibration: its size, every matrix zero (what ROS tools
-/// read as "not calibrated").
-fn uncalibrated_info(header: Header, width: u32, height: u32) -> CameraInfo {
-    CameraInfo {
-        header,
-        height,
-        width,
-        distortion_model: String::new(),
-        d: Vec::new(),
-        k: [0.0; 9],
-        r: [0.0; 9],
-        p: [0.0; 12],
-        binning_x: 0,
-        binning_y: 0,
-        roi: RegionOfInterest::default(),
-    }
-}
-
-fn now_since_epoch() -> Duration {
-    SystemTime::now()
-        .duration_since(UNIX_EPOCH)
-        .unwrap_or_default()
-}
-
-fn stamp_of(since_epoch: Duration) -> Time {
-    Time {
-        sec: i32::try_from(since_epoch.as_secs()).unwrap_or(i32::MAX),
-        nanosec: since_epoch.subsec_nanos(),
-    }
+fn control_declaration(camera: &str, state: &ControlState) -> Declaration {
+    let from = if state.has_auto { AUTO } else { state.minimum };
+    Declaration::new(
+        &format!("{camera}.{}", state.kind.key()),
+        Value::Integer(state.setting.parameter()),
+        &format!("{camera}'s {}.", state.kind.description()),
+    )
+    .dynamic()
+    .integer_range(from, state.maximum)
+    .effect("Set on the camera at once, and again when it comes back after an unplug.")
 }
 
 #[cfg(test)]
@@ -370,24 +331,49 @@ mod tests {
     #[test]
     fn every_option_is_a_parameter() {
         let args = Args::parse_from(["so101_camera_node", "--camera", "top=fake:"]);
-        let parameters = declarations(&args);
-        // Listing and a run's length are no settings of the node.
+        let mut fake = FakeCamera::new(Default::default());
+        let mode = modes::choose(&fake.modes().unwrap(), None, None).unwrap();
+        let controls = fake.open(mode).unwrap().controls();
+        let parameters = declarations(&args, &[("top", &controls)]);
+        // Listing, waiting, a run's length and start controls (each its own parameter) are no
+        // settings of the node.
         assert_eq!(
             Options::of::<Args>().undeclared(&parameters),
-            ["list", "duration"]
+            ["control", "wait", "list", "duration"]
         );
         assert_documented("so101_camera_node", &parameters);
     }
 
     #[test]
-    fn real_devices_are_refused_until_the_v4l2_backend_exists() {
-        let request: CameraRequest = "top=/dev/video0".parse().unwrap();
-        let refused = device_of(&request)
+    fn a_missing_device_node_is_refused_with_the_cameras_there_are() {
+        let request: CameraRequest = "top=/dev/video-none-such".parse().unwrap();
+        let refused = device_of(&request, None)
             .err()
             .map(|e| e.to_string())
             .unwrap_or_default();
-        assert!(refused.contains("no V4L2 backend"), "{refused}");
+        assert!(
+            refused.contains("--camera top: no camera at /dev/video-none-such"),
+            "{refused}"
+        );
         let bad: CameraRequest = "top=fake:hdr".parse().unwrap();
-        assert!(device_of(&bad).is_err());
+        assert!(device_of(&bad, None).is_err());
+    }
+
+    #[test]
+    fn a_control_change_reaches_its_camera() {
+        let (sender, changes) = channel();
+        let senders = BTreeMap::from([("wrist".to_owned(), sender)]);
+        forward_control_change("wrist.exposure", &Value::Integer(156), &senders);
+        forward_control_change("wrist.gain", &Value::Integer(AUTO), &senders);
+        forward_control_change("top.exposure", &Value::Integer(1), &senders);
+        forward_control_change("jpeg_quality", &Value::Integer(1), &senders);
+        let got: Vec<_> = changes.try_iter().collect();
+        assert_eq!(
+            got,
+            [
+                (ControlKind::Exposure, Setting::Manual(156)),
+                (ControlKind::Gain, Setting::Auto)
+            ]
+        );
     }
 }

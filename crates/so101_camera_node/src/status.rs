@@ -2,6 +2,8 @@
 
 use so101_msgs::diagnostic_msgs::{DiagnosticStatus, KeyValue};
 
+use crate::controls::ControlKind;
+
 /// One camera's counters and state.
 #[derive(Debug, Clone, Default, PartialEq)]
 pub struct CameraStatus {
@@ -22,6 +24,8 @@ pub struct CameraStatus {
     pub unplugs: u64,
     /// Capture to publish of the last frame, ms.
     pub latency_ms: f64,
+    /// The image controls as the camera reports them (-1: automatic).
+    pub controls: Vec<(ControlKind, i64)>,
 }
 
 /// The diagnostic status of a camera, with its frame rate over the last report period.
@@ -40,21 +44,28 @@ pub fn diagnostic(status: &CameraStatus, fps: f64) -> DiagnosticStatus {
         key: key.to_owned(),
         value,
     };
+    let mut values = vec![
+        value("mode", status.state.clone()),
+        value("fps", format!("{fps:.2}")),
+        value("frames", status.frames.to_string()),
+        value("device_drops", status.device_drops.to_string()),
+        value("broken_frames", status.broken_frames.to_string()),
+        value("timeouts", status.timeouts.to_string()),
+        value("unplugs", status.unplugs.to_string()),
+        value("latency_ms", format!("{:.2}", status.latency_ms)),
+    ];
+    values.extend(
+        status
+            .controls
+            .iter()
+            .map(|(kind, setting)| value(kind.key(), setting.to_string())),
+    );
     DiagnosticStatus {
         level,
         name: format!("so101_camera_node: {}", status.name),
         message,
         hardware_id: status.device.clone(),
-        values: vec![
-            value("mode", status.state.clone()),
-            value("fps", format!("{fps:.2}")),
-            value("frames", status.frames.to_string()),
-            value("device_drops", status.device_drops.to_string()),
-            value("broken_frames", status.broken_frames.to_string()),
-            value("timeouts", status.timeouts.to_string()),
-            value("unplugs", status.unplugs.to_string()),
-            value("latency_ms", format!("{:.2}", status.latency_ms)),
-        ],
+        values,
     }
 }
 
