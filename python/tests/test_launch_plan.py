@@ -9,7 +9,7 @@ import re
 
 import pytest
 
-from so101 import launch
+from so101 import launch, launch_plan
 from so101.paths import repo_root
 
 
@@ -22,7 +22,7 @@ def binaries(tmp_path, monkeypatch):
 
 def argv_of(argv: list[str]) -> dict[str, list[str]]:
     args = launch.parser().parse_args(argv)
-    return {spec.name: spec.argv[1:] for spec in launch.plan(args)}
+    return {spec.name: spec.argv[1:] for spec in launch_plan.plan(args)}
 
 
 def regexes(argv: list[str]) -> list[str]:
@@ -32,10 +32,10 @@ def regexes(argv: list[str]) -> list[str]:
 def test_recording_keeps_compressed_cameras_by_default(binaries):
     nodes = argv_of(["--control", "expert", "--record", "--sim-args", "--cameras top"])
     sim = nodes["so101_sim_node"]
-    assert "--jpeg" in sim and sim[sim.index("--jpeg-quality") + 1] == str(launch.DEFAULT_JPEG_QUALITY)
+    assert "--jpeg" in sim and sim[sim.index("--jpeg-quality") + 1] == str(launch_plan.DEFAULT_JPEG_QUALITY)
     assert sim[-2:] == ["--cameras", "top"]
-    assert regexes(nodes["recorder_node"]) == launch.COMPRESSED_RECORDING
-    assert "camera/[^/]+/image_raw/compressed" in launch.COMPRESSED_RECORDING
+    assert regexes(nodes["recorder_node"]) == launch_plan.COMPRESSED_RECORDING
+    assert "camera/[^/]+/image_raw/compressed" in launch_plan.COMPRESSED_RECORDING
 
 
 def test_raw_images_and_the_users_own_flags(binaries):
@@ -57,14 +57,14 @@ def test_the_compressed_set_is_recorder_nodes_default_set_with_compressed_camera
     defaults = re.findall(r'"([^"]+)"', block)
     assert "camera/[^/]+/image_raw" in defaults
     swapped = [p + "/compressed" if p == "camera/[^/]+/image_raw" else p for p in defaults]
-    assert launch.COMPRESSED_RECORDING == swapped
+    assert launch_plan.COMPRESSED_RECORDING == swapped
 
 
 def test_rviz_needs_rviz2_on_path_and_says_how_to_get_it(binaries, tmp_path, monkeypatch):
     monkeypatch.setenv("PATH", str(tmp_path / "empty"))
     args = launch.parser().parse_args(["--control", "none", "--rviz", "--log-dir", str(tmp_path / "logs")])
     with pytest.raises(SystemExit, match="rviz2 on PATH.*ros-jazzy-rviz2"):
-        launch.plan(args)
+        launch_plan.plan(args)
 
 
 def test_rviz_opens_the_view_with_the_description_package_on_the_ament_path(binaries, tmp_path, monkeypatch):
@@ -78,9 +78,78 @@ def test_rviz_opens_the_view_with_the_description_package_on_the_ament_path(bina
 
     monkeypatch.setattr(description, "install", lambda prefix: description.share_directory(prefix))
     args = launch.parser().parse_args(["--control", "none", "--rviz", "--log-dir", str(tmp_path / "logs")])
-    specs = {spec.name: spec for spec in launch.plan(args)}
+    specs = {spec.name: spec for spec in launch_plan.plan(args)}
     assert "so101_state_publisher" in specs  # --rviz implies --tf
     rviz = specs["rviz2"]
     prefix = tmp_path / "logs" / "ros_prefix"
     assert rviz.argv == [str(bin_dir / "rviz2"), "-d", str(prefix / "share/so101_description/rviz/so101.rviz")]
     assert rviz.env["AMENT_PREFIX_PATH"] == f"{prefix}:/opt/ros/jazzy"
+
+
+@pytest.fixture
+def real_binaries(binaries, tmp_path):
+    for name in ("so101_camera_node", "so101_feetech_driver", "so101_servo_emulator"):
+        (tmp_path / name).touch()
+
+
+def test_cameras_are_served_beside_the_driver_and_recorded_as_jpeg(real_binaries, tmp_path):
+    argv = ["--robot", "real", "--emulate", "--control", "none", "--record", "--log-dir", str(tmp_path / "logs")]
+    argv += ["--camera", "top=/dev/video0", "--camera", "wrist=/dev/v4l/by-id/usb-Cam-video-index0:640x480@30"]
+    argv += ["--camera-args", "--control top.exposure=156"]
+    args = launch.parser().parse_args(argv)
+    specs = {spec.name: spec for spec in launch_plan.plan(args)}
+    camera = specs["so101_camera_node"]
+    assert camera.argv[1:] == [
+        "--camera",
+        "top=/dev/video0",
+        "--camera",
+        "wrist=/dev/v4l/by-id/usb-Cam-video-index0:640x480@30",
+        "--control",
+        "top.exposure=156",
+    ]
+    assert camera.ready == "publisher /camera/top/image_raw/compressed"
+    names = list(specs)
+    assert names.index("so101_feetech_driver") < names.index("so101_camera_node") < names.index("recorder_node")
+    assert "camera/[^/]+/image_raw/compressed" in regexes(specs["recorder_node"].argv)
+
+
+def test_the_sim_has_its_own_cameras(binaries, tmp_path):
+    args = launch.parser().parse_args(["--control", "none", "--camera", "top=/dev/video0", "--log-dir", str(tmp_path)])
+    with pytest.raises(SystemExit, match="the sim renders its own"):
+        launch_plan.plan(args)
+
+
+def test_an_emulated_leader_arm_stands_beside_the_emulated_follower(real_binaries, tmp_path):
+    logs = tmp_path / "logs"
+    args = launch.parser().parse_args(["--robot", "real", "--emulate", "--teleop-source", "leader", "--log-dir", str(logs)])
+    specs = {spec.name: spec for spec in launch_plan.plan(args)}
+    leader_bus = str(logs / "leader_bus")
+    assert specs["leader_emulator"].argv[1:3] == ["--link", leader_bus]
+    leader = specs["leader_arm"].argv
+    assert leader[leader.index("--port") + 1] == leader_bus and "--leader" in leader
+    assert leader[leader.index("--calibration") + 1] == specs["leader_emulator"].argv[-1]
+    without = launch.parser().parse_args(["--robot", "real", "--port", "/dev/ttyACM0", "--teleop-source", "leader"])
+    with pytest.raises(SystemExit, match="--leader-port"):
+        launch_plan.plan(without)
+
+
+@pytest.mark.parametrize(
+    ("argv", "says"),
+    [
+        (["--control", "expert", "--record", "--episode-time", "5"], "the expert marks its own episodes"),
+        (["--control", "teleop", "--record", "--episode-time", "5"], "the keyboard teleop marks episodes itself"),
+        (["--control", "none", "--episode-time", "5"], "add --record"),
+    ],
+)
+def test_a_timed_session_is_refused_where_someone_else_marks_the_episodes(argv, says):
+    with pytest.raises(SystemExit, match=says):
+        launch_plan.check_session(launch.parser().parse_args(argv))
+
+
+def test_a_timed_session_records_no_episode_by_itself(binaries, tmp_path):
+    args = launch.parser().parse_args(
+        ["--control", "none", "--record", "--episode-time", "5", "--teleop-source", "gamepad", "--log-dir", str(tmp_path)]
+    )
+    launch_plan.check_session(args)
+    recorder = {spec.name: spec for spec in launch_plan.plan(args)}["recorder_node"].argv
+    assert "--start" not in recorder

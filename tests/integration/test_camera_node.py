@@ -6,32 +6,15 @@ unplug are reported on /diagnostics and the camera is reopened when it comes bac
 
 from __future__ import annotations
 
-import io
 import subprocess
 import time
 
 import numpy as np
 import pytest
+from fake_camera import decoded, picture
 from harness import SimNode, node_binary, node_environment, reliable_qos, stamp_seconds, wait_until
 
 BINARY = "so101_camera_node"
-
-
-def picture(width: int, height: int, sequence: int) -> np.ndarray:
-    """The fake camera's picture of frame `sequence` (so101_camera_node::fake::picture)."""
-    x = np.arange(width) * 255 // max(width - 1, 1)
-    y = np.arange(height) * 255 // max(height - 1, 1)
-    image = np.zeros((height, width, 3), dtype=np.int64)
-    image[:, :, 0] = x[None, :]
-    image[:, :, 1] = y[:, None]
-    image[:, :, 2] = (sequence * 8) % 256
-    return image
-
-
-def decoded(message) -> np.ndarray:
-    from PIL import Image as PilImage
-
-    return np.asarray(PilImage.open(io.BytesIO(bytes(message.data))).convert("RGB")).astype(np.int64)
 
 
 def start(tmp_path, *cameras: str, extra: tuple[str, ...] = ()) -> SimNode:

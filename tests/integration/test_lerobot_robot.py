@@ -360,6 +360,40 @@ def test_the_robot_drives_the_feetech_driver_alike(arm_factory, tmp_path):
     assert not robot.is_connected
 
 
+def test_the_robot_sees_through_so101_camera_node_s_jpeg_frames(arm_factory, tmp_path):
+    """so101_ros with a compressed camera on the driver and so101_camera_node (a fake camera): the
+    observation holds the camera's JPEG frame decoded, the picture the camera served; a camera
+    declared at another size is refused at connect with both sizes."""
+    from fake_camera import picture
+
+    from so101.lerobot.robot import SO101ROS, RosCameraConfig, SO101ROSConfig
+
+    arm_factory()
+    camera = SimNode(node_binary("so101_camera_node"), ["--camera", "top=fake:64x48@30"], tmp_path / "camera.log")
+    try:
+
+        def robot(width: int) -> SO101ROS:
+            cameras = {"top": RosCameraConfig(compressed=True, width=width, height=48)}
+            return SO101ROS(SO101ROSConfig(id="arm", calibration_dir=tmp_path / "cal", cameras=cameras, connect_timeout_s=30.0))
+
+        seeing = robot(64)
+        assert seeing.config.cameras["top"].topic == "camera/top/image_raw/compressed"
+        assert seeing.observation_features["top"] == (48, 64, 3)
+        seeing.connect()
+        try:
+            image = seeing.get_observation()["top"]
+            assert image.shape == (48, 64, 3) and image.dtype == np.uint8
+            sequence = int(round(image[:, :, 2].mean() / 8))
+            assert np.abs(image.astype(np.int64) - picture(64, 48, sequence)).mean() < 3.0
+        finally:
+            seeing.disconnect()
+        with pytest.raises(ValueError, match="sends 64x48 frames, the config declares 80x48"):
+            robot(80).connect()
+        camera.assert_alive()
+    finally:
+        assert camera.stop() == 0, camera.log_tail()
+
+
 def test_connect_names_the_silent_topic(tmp_path):
     from so101.lerobot.robot import SO101ROS, SO101ROSConfig
 

@@ -75,6 +75,8 @@ pub enum BagError {
     },
     #[error("no episode is being recorded")]
     NotRecording,
+    #[error("{0}")]
+    NothingToDiscard(&'static str),
     #[error("episode {index} stopped, but its recording failed: {error}")]
     Failed { index: u64, error: String },
 }
@@ -153,6 +155,9 @@ pub struct BagWriter {
     topics: Vec<TopicInfo>,
     next_index: u64,
     episode: Option<Episode>,
+    /// The episode closed last (its index and directory), until the next one starts: what
+    /// `discard_last` deletes.
+    last_closed: Option<(u64, PathBuf)>,
 }
 
 /// Messages between two looks at the file size (split by size).
@@ -170,6 +175,7 @@ impl BagWriter {
             topics: Vec::new(),
             next_index,
             episode: None,
+            last_closed: None,
         })
     }
 
@@ -197,6 +203,7 @@ impl BagWriter {
                 tracing::warn!(error = %error_chain(&error), "the previous episode ended with an error");
             }
         }
+        self.last_closed = None;
         // Claimed with create_dir, not create_dir_all: another recorder on the same directory
         // takes the next number instead of writing into this one.
         let (index, name, dir) = loop {
@@ -470,6 +477,7 @@ impl BagWriter {
             return Err(BagError::NotRecording);
         };
         episode.info.error = episode.failed.clone();
+        self.last_closed = Some((episode.info.index, episode.dir.clone()));
         let metadata = write_metadata_yaml(&episode, &self.topics);
         tracing::info!(
             episode = episode.info.index,
@@ -503,6 +511,23 @@ impl BagWriter {
             tracing::info!(episode = index, "episode discarded");
         }
         // The discarded index is used again: numbering stays contiguous.
+        self.next_index = index;
+        Ok(index)
+    }
+
+    /// Deletes the episode closed last, between it and the next start (re-recording an episode
+    /// judged during the reset period after it). Its index is used again.
+    pub fn discard_last(&mut self) -> Result<u64, BagError> {
+        if self.episode.is_some() {
+            return Err(BagError::NothingToDiscard(
+                "an episode is being recorded: discard deletes it",
+            ));
+        }
+        let (index, dir) = self.last_closed.take().ok_or(BagError::NothingToDiscard(
+            "no episode closed since the last start",
+        ))?;
+        let _ = std::fs::remove_dir_all(&dir);
+        tracing::info!(episode = index, "closed episode discarded");
         self.next_index = index;
         Ok(index)
     }
@@ -757,6 +782,28 @@ mod tests {
         bag.start(StartOptions::default(), 10, Some(true)).unwrap();
         let yaml = std::fs::read_to_string(first.join("metadata.yaml")).unwrap();
         assert!(yaml.contains("\"success\": \"true\""), "{yaml}");
+    }
+
+    #[test]
+    fn the_episode_closed_last_can_be_discarded_until_the_next_starts() {
+        let dir = tempfile::tempdir().unwrap();
+        let mut bag = BagWriter::new(options(dir.path())).unwrap();
+        assert!(bag.discard_last().is_err(), "nothing closed yet");
+        bag.start(StartOptions::default(), 1, None).unwrap();
+        assert!(bag.discard_last().is_err(), "an episode is running");
+        bag.stop(2, None).unwrap();
+        let first = bag.start(StartOptions::default(), 3, None).unwrap();
+        bag.stop(4, None).unwrap();
+        assert_eq!(bag.discard_last().unwrap(), 1);
+        assert!(!first.exists());
+        assert!(bag.discard_last().is_err(), "only the last one");
+        let again = bag.start(StartOptions::default(), 5, None).unwrap();
+        assert_eq!(again, first, "its number is used again");
+        bag.stop(6, None).unwrap();
+        assert!(dir
+            .path()
+            .join(episode_bag::episode_dir_name("episode", 0))
+            .exists());
     }
 
     #[test]

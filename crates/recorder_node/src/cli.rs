@@ -6,9 +6,9 @@ use so101_core::ros::NodeArgs;
 
 /// Records the stack's topics into rosbag2-compatible MCAP bags, one bag directory per episode
 /// (`<output>/episode_NNNNNN/` with .mcap file(s) and metadata.yaml). Episodes are started and
-/// stopped by /episode/events (std_msgs/String: start, stop, success, failure, discard, rerecord)
-/// and by the services /recorder/start, /recorder/stop, /recorder/discard (std_srvs/Trigger) and
-/// /recorder/mark_success (std_srvs/SetBool), or by --start.
+/// stopped by /episode/events (std_msgs/String: start, stop, success, failure, discard, rerecord,
+/// discard_last) and by the services /recorder/start, /recorder/stop, /recorder/discard
+/// (std_srvs/Trigger) and /recorder/mark_success (std_srvs/SetBool), or by --start.
 #[derive(Debug, clap::Parser)]
 #[command(version)]
 pub struct Args {

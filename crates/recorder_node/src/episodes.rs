@@ -3,7 +3,8 @@
 //!
 //! Events: `start`, optionally followed by a JSON object (`start {"task": "put the cube in the bin",
 //! "seed": 3}`), `stop`, `success`, `failure`, `discard` (throw the current episode away) and
-//! `rerecord` (discard and start again).
+//! `rerecord` (discard and start again) and `discard_last` (between episodes: delete the one just
+//! closed, to record it again).
 
 use serde::Deserialize;
 use so101_core::episode_bag::custom_data;
@@ -16,6 +17,7 @@ pub enum EpisodeEvent {
     Failure,
     Discard,
     Rerecord,
+    DiscardLast,
 }
 
 /// What a `start` may set for the episode it starts.
@@ -29,7 +31,7 @@ pub struct StartOptions {
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum EventError {
     #[error(
-        "unknown episode event {0:?} (expected start, stop, success, failure, discard or rerecord)"
+        "unknown episode event {0:?} (expected start, stop, success, failure, discard, rerecord or discard_last)"
     )]
     Unknown(String),
     #[error("bad options after start: {0} (expected a JSON object like {{\"task\": \"...\", \"seed\": 3}})")]
@@ -56,6 +58,7 @@ pub fn parse_event(text: &str) -> Result<EpisodeEvent, EventError> {
         "failure" => EpisodeEvent::Failure,
         "discard" => EpisodeEvent::Discard,
         "rerecord" => EpisodeEvent::Rerecord,
+        "discard_last" => EpisodeEvent::DiscardLast,
         _ => return Err(EventError::Unknown(text.to_owned())),
     };
     if rest.is_empty() {
@@ -127,6 +130,7 @@ mod tests {
         );
         assert_eq!(parse_event("STOP"), Ok(EpisodeEvent::Stop));
         assert_eq!(parse_event("rerecord"), Ok(EpisodeEvent::Rerecord));
+        assert_eq!(parse_event("discard_last"), Ok(EpisodeEvent::DiscardLast));
         assert!(matches!(
             parse_event("start {\"colour\": 1}"),
             Err(EventError::Options(_))

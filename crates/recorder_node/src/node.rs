@@ -61,6 +61,7 @@ enum Command {
     Stop(u64, Option<bool>, Option<Reply>),
     Mark(bool, Option<Reply>),
     Discard(Option<Reply>),
+    DiscardLast(Option<Reply>),
     Dropped(u64),
     Shutdown(Option<bool>),
 }
@@ -203,6 +204,11 @@ fn spawn_writer(
                     reply,
                     bag.discard()
                         .map(|index| format!("episode {index} discarded")),
+                ),
+                Ok(Command::DiscardLast(reply)) => answer(
+                    reply,
+                    bag.discard_last()
+                        .map(|index| format!("closed episode {index} discarded")),
                 ),
                 Ok(Command::Dropped(count)) => bag.add_dropped(count),
                 Ok(Command::Shutdown(hint)) => {
@@ -479,6 +485,7 @@ struct Control {
     start: Server<TriggerRequest, TriggerResponse>,
     stop: Server<TriggerRequest, TriggerResponse>,
     discard: Server<TriggerRequest, TriggerResponse>,
+    discard_last: Server<TriggerRequest, TriggerResponse>,
     mark_success: Server<SetBoolRequest, TriggerResponse>,
     last_task_success: Option<bool>,
     pending: Vec<PendingCall>,
@@ -490,6 +497,7 @@ enum Service {
     Start,
     Stop,
     Discard,
+    DiscardLast,
     MarkSuccess,
 }
 
@@ -509,6 +517,7 @@ impl Control {
             start: node.server::<Trigger>(services::RECORDER_START)?,
             stop: node.server::<Trigger>(services::RECORDER_STOP)?,
             discard: node.server::<Trigger>(services::RECORDER_DISCARD)?,
+            discard_last: node.server::<Trigger>(services::RECORDER_DISCARD_LAST)?,
             mark_success: node.server::<SetBool>(services::RECORDER_MARK_SUCCESS)?,
             last_task_success: None,
             pending: Vec::new(),
@@ -546,6 +555,9 @@ impl Control {
         }
         for id in take_trigger(&self.discard) {
             calls.push((Service::Discard, id, EpisodeEvent::Discard));
+        }
+        for id in take_trigger(&self.discard_last) {
+            calls.push((Service::DiscardLast, id, EpisodeEvent::DiscardLast));
         }
         for id in take_trigger(&self.start) {
             calls.push((
@@ -588,6 +600,7 @@ impl Control {
                 Service::Start => respond(&self.start, call.id, result),
                 Service::Stop => respond(&self.stop, call.id, result),
                 Service::Discard => respond(&self.discard, call.id, result),
+                Service::DiscardLast => respond(&self.discard_last, call.id, result),
                 Service::MarkSuccess => respond(&self.mark_success, call.id, result),
             }
         }
@@ -605,6 +618,7 @@ impl Control {
             EpisodeEvent::Success => Command::Mark(true, reply),
             EpisodeEvent::Failure => Command::Mark(false, reply),
             EpisodeEvent::Discard => Command::Discard(reply),
+            EpisodeEvent::DiscardLast => Command::DiscardLast(reply),
             EpisodeEvent::Rerecord => {
                 if commands.send(Command::Discard(None)).is_err() {
                     return;

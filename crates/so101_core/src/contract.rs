@@ -70,6 +70,8 @@ pub mod services {
     pub const RECORDER_START: &str = "recorder/start";
     pub const RECORDER_STOP: &str = "recorder/stop";
     pub const RECORDER_DISCARD: &str = "recorder/discard";
+    /// Between episodes: deletes the one closed last (re-recording it).
+    pub const RECORDER_DISCARD_LAST: &str = "recorder/discard_last";
     /// std_srvs/SetBool: marks the current (or last) episode a success or not.
     pub const RECORDER_MARK_SUCCESS: &str = "recorder/mark_success";
 }
@@ -133,6 +135,7 @@ pub fn python_module() -> String {
         ("RECORDER_START", services::RECORDER_START),
         ("RECORDER_STOP", services::RECORDER_STOP),
         ("RECORDER_DISCARD", services::RECORDER_DISCARD),
+        ("RECORDER_DISCARD_LAST", services::RECORDER_DISCARD_LAST),
         ("RECORDER_MARK_SUCCESS", services::RECORDER_MARK_SUCCESS),
     ];
     for (name, value) in constants {

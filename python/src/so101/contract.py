@@ -85,6 +85,7 @@ TORQUE_ENABLE = "torque_enable"
 RECORDER_START = "recorder/start"
 RECORDER_STOP = "recorder/stop"
 RECORDER_DISCARD = "recorder/discard"
+RECORDER_DISCARD_LAST = "recorder/discard_last"
 RECORDER_MARK_SUCCESS = "recorder/mark_success"
 
 # The episode-bag layout (so101_core::episode_bag): directories <prefix>_<index:06>,

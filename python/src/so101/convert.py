@@ -281,10 +281,15 @@ def convert(args) -> int:
     converted, successful, skipped, frames_written = 0, 0, [], 0
     started = time.monotonic()
     notes: list[str] = []
-    environment_state = not args.no_environment_state
+    # None: decided by the first episode (a real arm records no /cube/pose: then none has it).
+    environment_state: bool | None = False if args.no_environment_state else None
     for path in tqdm(paths, desc="episodes", unit="episode", disable=args.quiet):
         try:
             episode = read_episode(path, cameras)
+            if environment_state is None:
+                environment_state = bool(episode.cube_pose.times)
+                if not environment_state:
+                    log.info("%s has no /cube/pose (a real arm): observation.environment_state left out", path.name)
             if args.successful_only and episode.success is not True:
                 skipped.append(f"{path.name}: not marked successful")
                 continue
@@ -429,7 +434,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument(
         "--no-environment-state",
         action="store_true",
-        help="leave out observation.environment_state (the cube's pose from /cube/pose; needed otherwise)",
+        help="leave out observation.environment_state (the cube's pose from /cube/pose); without it, the "
+        "dataset has it when the first episode has /cube/pose (the sim), and then every episode needs it",
     )
     parser.add_argument(
         "--max-gap",

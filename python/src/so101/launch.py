@@ -6,8 +6,12 @@
             for the emulator and the driver alike)
   control:  teleop (teleop_node: keyboard, gamepad or leader arm), expert (the scripted expert,
             --episodes N), policy (so101-run-policy with --policy), or none
+  cameras:  --camera NAME=DEVICE (real arm): so101_camera_node serves USB cameras beside the
+            driver (camera/NAME/image_raw/compressed, as the sim's cameras)
   --record: recorder_node, one bag per episode into --bags (the expert and the keyboard mark the
-            episodes; with a policy, one episode from start to stop). Cameras are recorded
+            episodes; with a policy, one episode from start to stop; with --episode-time S, timed
+            episodes as lerobot-record records them: S seconds each, --reset-time between, keys
+            right arrow (next), left arrow (re-record), Esc (stop)). Cameras are recorded
             compressed: the sim also publishes JPEG (--jpeg-quality, default 100) and the recorder
             keeps /camera/NAME/image_raw/compressed instead of the raw images (8 MB per second of
             robot time for the three 640x480 cameras at 30 Hz instead of 83, at 52 dB PSNR);
@@ -34,13 +38,13 @@ Examples:
   so101-launch --control expert --episodes 10 --record --bags bags/
   so101-launch --robot real --port /dev/ttyACM0 --robot-id my_arm --control policy --policy outputs/act_so101/checkpoints/last/pretrained_model
   so101-launch --control teleop --teleop-source gamepad --record
+  so101-launch --robot real --port /dev/ttyACM0 --robot-id my_arm --teleop-source leader --leader-port /dev/ttyACM1 --camera top=/dev/video0 --camera wrist=/dev/video2 --record --episodes 50 --episode-time 30
 """
 
 from __future__ import annotations
 
 import argparse
 import os
-import shlex
 import shutil
 import signal
 import subprocess
@@ -49,53 +53,11 @@ import time
 from dataclasses import dataclass
 from pathlib import Path
 
-from . import contract
+from . import contract, record_session
 from . import process as processes
 from .isolation import network_namespace_problem
-from .paths import asset, isolated_wrapper, node_binary, node_environment
-
-# The arm `--robot real --emulate` emulates unless the user names a calibration.
-EMULATED_ARM_CALIBRATION = "emulated_arm/so101_calibration.json"  # under assets/
-
-# JPEG quality of the recorded camera frames (docs/benchmarks.md, "Recording size": the best
-# fidelity within 10 MB per second of robot time for the three default cameras).
-DEFAULT_JPEG_QUALITY = 100
-# What the recorder keeps by default with compressed cameras: recorder_node's default set
-# (crates/recorder_node/src/topics.rs DEFAULT_PATTERNS; a unit test holds the two together) with
-# the cameras' compressed topics in place of their raw images.
-COMPRESSED_RECORDING = [
-    "joint_states",
-    "joint_commands",
-    "forward_position_controller/commands",
-    "leader/joint_states",
-    f"{contract.CAMERA_PREFIX}/[^/]+/{contract.IMAGE_COMPRESSED}",
-    f"{contract.CAMERA_PREFIX}/[^/]+/{contract.CAMERA_INFO}",
-    "task/reward",
-    "task/success",
-    "cube/pose",
-    "episode/events",
-    "diagnostics",
-]
-# recorder_node flags that choose the topics themselves (then the launcher adds none).
-RECORDER_TOPIC_FLAGS = ("--topics", "--all", "--regex")
-
-
-def has_flag(argv: list[str], flag: str) -> bool:
-    """`flag` among `argv`, alone or as `flag=VALUE`."""
-    return any(arg == flag or arg.startswith(flag + "=") for arg in argv)
-
-
-@dataclass
-class NodeSpec:
-    """One process of the launch: its name (log file), command line, and what shows it is up."""
-
-    name: str
-    argv: list[str]
-    ready: str = ""  # a graph condition, see Launch.wait_ready
-    terminal: bool = False  # keeps the launcher's terminal (keyboard teleop)
-    ends_run: bool = False  # its own exit ends the run
-    open_stdin: bool = False  # reads commands from stdin and ends at its EOF (the emulator)
-    env: dict[str, str] | None = None  # its whole environment (default: node_environment())
+from .launch_plan import DEFAULT_JPEG_QUALITY, NodeSpec, check_session, plan
+from .paths import isolated_wrapper, node_environment
 
 
 @dataclass
@@ -104,151 +66,6 @@ class Running:
     process: subprocess.Popen
     log: Path
     stopped_by_us: bool = False
-
-
-def plan(args) -> list[NodeSpec]:
-    """The processes of a profile, in start order."""
-    specs: list[NodeSpec] = []
-    ns = ["--namespace", args.namespace] if args.namespace else []
-    if args.robot == "sim":
-        sim = [str(node_binary("so101_sim_node")), "--seed", str(args.seed), *ns]
-        if args.lite:
-            sim.append("--lite")
-        if args.speed:
-            sim += ["--speed", args.speed]
-        extra = shlex.split(args.sim_args)
-        if args.record and not args.raw_images:
-            # The JPEG frames the recorder keeps (the raw ones are still published for live peers).
-            sim += [] if has_flag(extra, "--jpeg") else ["--jpeg"]
-            sim += [] if has_flag(extra, "--jpeg-quality") else ["--jpeg-quality", str(args.jpeg_quality)]
-        sim += extra
-        specs.append(NodeSpec("so101_sim_node", sim, ready="publisher /joint_states"))
-    else:
-        port = args.port
-        calibration = args.calibration
-        if args.emulate:
-            port = port or str(Path(args.log_dir) / "servo_bus")
-            # The emulated servos come configured as the calibration the driver reads says.
-            if not calibration and not args.robot_id:
-                calibration = str(asset(EMULATED_ARM_CALIBRATION))
-            arm = Path(calibration) if calibration else lerobot_calibration_file(args.robot_id)
-            if not arm.is_file():
-                raise SystemExit(f"so101-launch: no calibration file {arm} for the emulated arm")
-            specs.append(
-                NodeSpec(
-                    "so101_servo_emulator",
-                    [str(node_binary("so101_servo_emulator")), "--link", port, "--calibration", str(arm)],
-                    ready=f"path {port}",
-                    open_stdin=True,
-                )
-            )
-        if not port:
-            raise SystemExit("so101-launch: --robot real needs --port (or --emulate)")
-        driver = [str(node_binary("so101_feetech_driver")), "--port", port, *ns]
-        if args.robot_id:
-            driver += ["--robot-id", args.robot_id]
-        if calibration:
-            driver += ["--calibration", calibration]
-        driver += shlex.split(args.driver_args)
-        specs.append(NodeSpec("so101_feetech_driver", driver, ready="publisher /joint_states"))
-        if args.control == "teleop" and args.teleop_source == "leader":
-            if not args.leader_port:
-                raise SystemExit("so101-launch: a leader arm on the real robot needs --leader-port")
-            leader = [str(node_binary("so101_feetech_driver")), "--port", args.leader_port, "--leader", *ns]
-            if args.leader_id:
-                leader += ["--robot-id", args.leader_id]
-            specs.append(NodeSpec("leader_arm", leader, ready="publisher /leader/joint_states"))
-
-    if args.tf or args.rviz:
-        specs.append(
-            NodeSpec(
-                "so101_state_publisher", [str(node_binary("so101_state_publisher")), *ns], ready="publisher /robot_description"
-            )
-        )
-    if args.rviz:
-        specs.append(rviz_spec(Path(args.log_dir) / "ros_prefix"))
-    if args.rerun:
-        sink = args.rerun
-        if sink == "spawn":
-            sink_args = ["--spawn"]
-        elif sink == "connect" or sink.startswith("connect="):
-            sink_args = ["--connect", *([sink.split("=", 1)[1]] if "=" in sink else [])]
-        else:
-            sink_args = ["--save", sink]
-        # Only the bridge subscribes to the task's reward this early (the recorder starts after it).
-        specs.append(
-            NodeSpec("so101_rerun", [str(node_binary("so101_rerun")), "live", *sink_args, *ns], ready="subscriber /task/reward")
-        )
-
-    if args.record:
-        recorder = [str(node_binary("recorder_node")), "--output", args.bags, "--task", args.task, *ns]
-        if args.control == "policy":
-            recorder.append("--start")  # no one marks episodes: one from start to stop
-        extra = shlex.split(args.recorder_args)
-        if not args.raw_images and not any(has_flag(extra, flag) for flag in RECORDER_TOPIC_FLAGS):
-            for pattern in COMPRESSED_RECORDING:
-                recorder += ["--regex", pattern]
-        recorder += extra
-        specs.append(NodeSpec("recorder_node", recorder, ready="subscriber /episode/events"))
-
-    if args.control in ("teleop", "expert"):
-        teleop = [str(node_binary("teleop_node")), *ns]
-        if args.control == "expert":
-            if args.robot != "sim":
-                raise SystemExit("so101-launch: the scripted expert needs the sim (it reads /cube/pose)")
-            teleop += ["--source", "expert", "--sim-time", "--seed", str(args.seed), "--task", args.task]
-            if args.episodes:
-                teleop += ["--episodes", str(args.episodes)]
-        else:
-            teleop += ["--source", args.teleop_source, "--mode", args.mode]
-        teleop += shlex.split(args.teleop_args)
-        specs.append(
-            NodeSpec("teleop_node", teleop, terminal=args.control == "teleop" and args.teleop_source == "keyboard", ends_run=True)
-        )
-    elif args.control == "policy":
-        if not args.policy:
-            raise SystemExit("so101-launch: --control policy needs --policy (a checkpoint directory or a Hub id)")
-        runner = [str(Path(sys.executable).parent / "so101-run-policy"), args.policy, *ns, "--quiet"]
-        runner += shlex.split(args.policy_args)
-        specs.append(NodeSpec("so101-run-policy", runner, ends_run=True))
-    return specs
-
-
-def rviz_spec(prefix: Path) -> NodeSpec:
-    """rviz2 with the stack's view, the so101_description package installed into `prefix` for its
-    package:// mesh URIs. rviz2 comes from the user's ROS 2 install, with its environment."""
-    from .description import RVIZ_CONFIG, install
-
-    rviz = shutil.which("rviz2")
-    if rviz is None:
-        raise SystemExit(
-            "so101-launch: --rviz needs rviz2 on PATH (ROS 2 Jazzy: apt install ros-jazzy-rviz2, then "
-            "source /opt/ros/jazzy/setup.bash); without it, `so101-description install DIR` gives the "
-            "package and view to open elsewhere"
-        )
-    share = install(prefix)
-    env = dict(os.environ)
-    env["AMENT_PREFIX_PATH"] = os.pathsep.join([str(prefix), *filter(None, [env.get("AMENT_PREFIX_PATH")])])
-    return NodeSpec("rviz2", [rviz, "-d", str(share / RVIZ_CONFIG)], env=env)
-
-
-def lerobot_calibration_file(robot_id: str) -> Path:
-    """Where LeRobot (and the driver's --robot-id) keeps a follower arm's calibration:
-    $HF_LEROBOT_CALIBRATION, else $HF_LEROBOT_HOME/calibration, else $HF_HOME/lerobot/calibration,
-    else ~/.cache/huggingface/lerobot/calibration; then robots/so_follower/ID.json."""
-    env = {
-        name: os.environ.get(name) or None
-        for name in ("HF_LEROBOT_CALIBRATION", "HF_LEROBOT_HOME", "HF_HOME", "XDG_CACHE_HOME", "HOME")
-    }
-    if env["HF_LEROBOT_CALIBRATION"]:
-        base = Path(env["HF_LEROBOT_CALIBRATION"])
-    elif env["HF_LEROBOT_HOME"]:
-        base = Path(env["HF_LEROBOT_HOME"]) / "calibration"
-    else:
-        cache = Path(env["XDG_CACHE_HOME"]) if env["XDG_CACHE_HOME"] else Path(env["HOME"] or "") / ".cache"
-        hf_home = Path(env["HF_HOME"]) if env["HF_HOME"] else cache / "huggingface"
-        base = hf_home / "lerobot" / "calibration"
-    return base / "robots" / "so_follower" / f"{robot_id}.json"
 
 
 class Launch:
@@ -260,7 +77,7 @@ class Launch:
         self._graph = None
 
     # ------------------------------------------------------------------ readiness
-    def _graph_node(self):
+    def graph_node(self):
         if self._graph is None:
             import rclpy
 
@@ -281,7 +98,7 @@ class Launch:
             if kind == "path":
                 up = Path(what).exists()
             elif kind in ("publisher", "subscriber"):
-                graph = self._graph_node()
+                graph = self.graph_node()
                 topic = self.prefix + what
                 count = graph.count_publishers(topic) if kind == "publisher" else graph.count_subscribers(topic)
                 up = count > 0
@@ -346,8 +163,9 @@ class Launch:
             rclpy.try_shutdown()
             self._graph = None
 
-    def watch(self, bags: Path | None) -> Running | None:
-        """Until a node exits; returns it (None when none is left). Meanwhile reports each episode
+    def watch(self, bags: Path | None, session=None) -> Running | None:
+        """Until a node exits; returns it (None when none is left, or when `session`, a
+        record_session.SessionRunner, has recorded its episodes). Meanwhile reports each episode
         the recorder closes in `bags`."""
         # Episodes already there (an earlier run's) are not this run's.
         reported: set[Path] = (
@@ -361,7 +179,9 @@ class Launch:
                     if bags is not None:
                         report_closed_episodes(bags, reported)
                     return entry
-            time.sleep(0.2)
+            if session is not None and session.poll():
+                return None
+            time.sleep(0.05)
         return None
 
 
@@ -431,10 +251,21 @@ def parser() -> argparse.ArgumentParser:
     real.add_argument("--leader-port", default=None, help="the leader arm's bus (--teleop-source leader)")
     real.add_argument("--leader-id", default=None, help="the leader arm's calibration id")
     real.add_argument("--driver-args", default="", help="more so101_feetech_driver flags")
+    real.add_argument(
+        "--camera",
+        action="append",
+        default=[],
+        metavar="NAME=DEVICE",
+        help="a camera for so101_camera_node, NAME=DEVICE[:WIDTHxHEIGHT][@FPS] (repeatable; e.g. "
+        "top=/dev/v4l/by-id/usb-...-video-index0); its JPEG frames are recorded with --record",
+    )
+    real.add_argument("--camera-args", default="", help='more so101_camera_node flags, e.g. "--control top.exposure=156"')
     control = p.add_argument_group("control")
     control.add_argument("--teleop-source", choices=["keyboard", "gamepad", "leader"], default="keyboard")
     control.add_argument("--mode", choices=["joint", "cartesian"], default="joint", help="teleop space")
-    control.add_argument("--episodes", type=int, default=0, help="expert: stop after N episodes (0: until Ctrl-C)")
+    control.add_argument(
+        "--episodes", type=int, default=0, help="expert or --episode-time: stop after N episodes (0: until stopped)"
+    )
     control.add_argument("--teleop-args", default="", help="more teleop_node flags")
     control.add_argument("--policy", default=None, help="policy checkpoint directory or Hub id (--control policy)")
     control.add_argument("--policy-args", default="", help='more so101-run-policy flags, e.g. "--duration 60"')
@@ -464,6 +295,18 @@ def parser() -> argparse.ArgumentParser:
         help=f"JPEG quality of the recorded sim camera frames (default {DEFAULT_JPEG_QUALITY})",
     )
     record.add_argument(
+        "--episode-time",
+        type=float,
+        default=0.0,
+        metavar="S",
+        help="record timed episodes as lerobot-record does: --episodes N (0: until Esc) of S seconds each, a "
+        "reset period between them; keys: right arrow ends the episode or the reset now, left arrow "
+        "re-records, Esc stops",
+    )
+    record.add_argument(
+        "--reset-time", type=float, default=10.0, metavar="S", help="seconds of each reset period (--episode-time)"
+    )
+    record.add_argument(
         "--recorder-args",
         default="",
         help="more recorder_node flags (--topics, --regex or --all choose the topics instead of the launcher)",
@@ -489,11 +332,13 @@ def main(argv: list[str] | None = None) -> int:
     log_dir = Path(args.log_dir)
     log_dir.mkdir(parents=True, exist_ok=True)
     try:
+        check_session(args)
         specs = plan(args)
     except FileNotFoundError as error:
         raise SystemExit(f"so101-launch: {error}") from error
 
     launch = Launch(log_dir, args.ready_timeout, args.stop_timeout, args.namespace)
+    keys = None
     # Ctrl-C is set explicitly: a launcher started as `so101-launch ... &` from a script inherits
     # SIGINT ignored, and so would every node it starts, deaf to the SIGINT that stops them.
     signal.signal(signal.SIGINT, signal.default_int_handler)
@@ -504,7 +349,19 @@ def main(argv: list[str] | None = None) -> int:
         for spec in specs:
             launch.start(spec)
         print("so101-launch: all nodes up (Ctrl-C stops them)", flush=True)
-        ended = launch.watch(Path(args.bags) if args.record else None)
+        session = None
+        if args.episode_time:
+            keys = record_session.TerminalKeys()
+            session = record_session.SessionRunner(
+                launch.graph_node(),
+                launch.prefix,
+                record_session.Session(args.episodes or sys.maxsize, args.episode_time, args.reset_time),
+                sim=args.robot == "sim",
+                keys=keys,
+            )
+        ended = launch.watch(Path(args.bags) if args.record else None, session)
+        if session is not None and session.session.done:
+            print("so101-launch: the recording session is over", flush=True)
         if ended is not None:
             code = ended.process.returncode
             if ended.spec.ends_run and code == 0:
@@ -518,6 +375,8 @@ def main(argv: list[str] | None = None) -> int:
         print(error, file=sys.stderr, flush=True)
         status = 1
     finally:
+        if keys is not None:
+            keys.close()
         launch.stop_all()
     for entry in launch.running:
         code = entry.process.returncode

@@ -1,7 +1,8 @@
 """LeRobot robot type `so101_ros`: a LeRobot `Robot` over the stack's topic contract.
 
 Observation: /joint_states (in LeRobot's SO-101 units, as the converter writes them) and the
-configured camera topics (sensor_msgs/Image); action: sensor_msgs/JointState by name on
+configured camera topics (sensor_msgs/Image, or the CompressedImage JPEG frames of so101_camera_node
+and the sim's --jpeg); action: sensor_msgs/JointState by name on
 /joint_commands. Works against so101_sim_node and so101_feetech_driver alike (same topics);
 calibration belongs to the driver node, so the robot is always calibrated.
 

@@ -12,9 +12,12 @@ from ... import contract
 @dataclass
 class RosCameraConfig:
     """One camera topic. width/height/fps are declared so the features are known before connect
-    (LeRobot builds the dataset first); frames of another size are refused at connect."""
+    (LeRobot builds the dataset first); frames of another size are refused at connect. With
+    `compressed` (or a topic ending in /compressed), sensor_msgs/CompressedImage (JPEG or PNG, what
+    so101_camera_node and the sim's --jpeg publish) instead of sensor_msgs/Image."""
 
-    topic: str = ""  # default: camera/<name>/image_raw under the namespace
+    topic: str = ""  # default: camera/<name>/image_raw (/compressed) under the namespace
+    compressed: bool = False
     width: int = 640
     height: int = 480
     fps: int = int(contract.CONTROL_RATE)  # the cameras publish at the control rate by default
@@ -27,7 +30,8 @@ class SO101ROSConfig(RobotConfig):
     namespace: str = ""
     joint_states_topic: str = contract.JOINT_STATES
     joint_commands_topic: str = contract.JOINT_COMMANDS
-    # {name: RosCameraConfig}; on the CLI: '{top: {width: 64, height: 48, fps: 30}}'.
+    # {name: RosCameraConfig}; on the CLI: '{top: {width: 64, height: 48, fps: 30}}', and for a
+    # camera's JPEG frames '{top: {compressed: true}}'.
     cameras: dict[str, RosCameraConfig] = field(default_factory=dict)
     # How long connect() waits for the first /joint_states (and a first frame per camera).
     connect_timeout_s: float = 10.0
@@ -40,5 +44,7 @@ class SO101ROSConfig(RobotConfig):
     def __post_init__(self):
         for name, camera in self.cameras.items():
             if not camera.topic:
-                camera.topic = contract.camera_topic(name)
+                leaf = contract.IMAGE_COMPRESSED if camera.compressed else contract.IMAGE_RAW
+                camera.topic = contract.camera_topic(name, leaf)
+            camera.compressed = camera.compressed or camera.topic.endswith("/compressed")
         super().__post_init__()

@@ -61,7 +61,7 @@ class SO101ROS(Robot):
         import rclpy
         from rclpy.executors import SingleThreadedExecutor
         from rclpy.qos import qos_profile_sensor_data
-        from sensor_msgs.msg import Image, JointState
+        from sensor_msgs.msg import CompressedImage, Image, JointState
 
         from ...messages import joint_positions
 
@@ -86,7 +86,8 @@ class SO101ROS(Robot):
 
         node.create_subscription(JointState, self.config.joint_states_topic, on_state, qos_profile_sensor_data)
         for name, camera in self.config.cameras.items():
-            node.create_subscription(Image, camera.topic, lambda msg, name=name: on_frame(name, msg), qos_profile_sensor_data)
+            kind = CompressedImage if camera.compressed else Image
+            node.create_subscription(kind, camera.topic, lambda msg, name=name: on_frame(name, msg), qos_profile_sensor_data)
         self._publisher = node.create_publisher(JointState, self.config.joint_commands_topic, 10)
         self._joint_state_type = JointState
         self._executor = SingleThreadedExecutor(context=self._context)
@@ -123,11 +124,13 @@ class SO101ROS(Robot):
                     "(is so101_sim_node or so101_feetech_driver running in this namespace and ROS domain?)"
                 )
             time.sleep(0.02)
+        from ...messages import image_size
+
         for name, camera in self.config.cameras.items():
-            msg = self._frames[name]
-            if (msg.height, msg.width) != (camera.height, camera.width):
+            width, height = image_size(self._frames[name])
+            if (height, width) != (camera.height, camera.width):
                 raise ValueError(
-                    f"so101_ros: camera {name!r} ({self._resolved(camera.topic)}) sends {msg.width}x{msg.height} frames, "
+                    f"so101_ros: camera {name!r} ({self._resolved(camera.topic)}) sends {width}x{height} frames, "
                     f"the config declares {camera.width}x{camera.height}"
                 )
 
