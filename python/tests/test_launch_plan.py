@@ -88,14 +88,14 @@ def test_rviz_opens_the_view_with_the_description_package_on_the_ament_path(bina
 
 @pytest.fixture
 def real_binaries(binaries, tmp_path):
-    for name in ("so101_camera_node", "so101_feetech_driver", "so101_servo_emulator"):
+    for name in ("so101_camera_node", "so101_feetech_driver", "so101_servo_emulator", "so101_rerun"):
         (tmp_path / name).touch()
 
 
 def test_cameras_are_served_beside_the_driver_and_recorded_as_jpeg(real_binaries, tmp_path):
     argv = ["--robot", "real", "--emulate", "--control", "none", "--record", "--log-dir", str(tmp_path / "logs")]
     argv += ["--camera", "top=/dev/video0", "--camera", "wrist=/dev/v4l/by-id/usb-Cam-video-index0:640x480@30"]
-    argv += ["--camera-args", "--control top.exposure=156"]
+    argv += ["--camera-args", "--control top.exposure=156", "--rerun", str(tmp_path / "run.rrd")]
     args = launch.parser().parse_args(argv)
     specs = {spec.name: spec for spec in launch_plan.plan(args)}
     camera = specs["so101_camera_node"]
@@ -111,6 +111,8 @@ def test_cameras_are_served_beside_the_driver_and_recorded_as_jpeg(real_binaries
     names = list(specs)
     assert names.index("so101_feetech_driver") < names.index("so101_camera_node") < names.index("recorder_node")
     assert "camera/[^/]+/image_raw/compressed" in regexes(specs["recorder_node"].argv)
+    rerun = specs["so101_rerun"].argv
+    assert rerun[rerun.index("--cameras") + 1] == "top,wrist", "Rerun shows the real cameras by their names"
 
 
 def test_the_sim_has_its_own_cameras(binaries, tmp_path):

@@ -6,6 +6,8 @@ unplug are reported on /diagnostics and the camera is reopened when it comes bac
 
 from __future__ import annotations
 
+import re
+import signal
 import subprocess
 import time
 
@@ -261,3 +263,42 @@ def test_wait_waits_for_a_camera_that_is_not_plugged_in(tmp_path):
         node.assert_alive()
     finally:
         assert node.stop() == 0, node.log_tail()
+
+
+def test_rerun_shows_the_camera_node_s_jpeg_frames(ros, tmp_path):
+    from harness import rrd_entities
+
+    node = start(tmp_path, "top=fake:64x48@30")
+    output = tmp_path / "live.rrd"
+    bridge = subprocess.Popen(
+        [str(node_binary("so101_rerun")), "live", "--save", str(output), "--cameras", "top", "--image-rate", "0"],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.STDOUT,
+        text=True,
+        env=node_environment(),
+    )
+    try:
+        wait_until(lambda: ros.node.count_subscribers("/camera/top/image_raw/compressed") >= 1, 20.0, "the bridge", node)
+        time.sleep(2.0)
+    finally:
+        bridge.send_signal(signal.SIGINT)  # it flushes the recording and exits
+        out, _ = bridge.communicate(timeout=60)
+        assert node.stop() == 0, node.log_tail()
+    assert bridge.returncode == 0, out
+    frames = rrd_entities(output).get("/cameras/top", 0)
+    assert frames > 40, f"{frames} camera frames in the recording of over 2 s at 30 fps"
+
+
+def test_a_timed_run_ends_with_each_camera_s_rate_losses_and_latency():
+    """What a user checks a camera with (docs/real_arm.md): a run of --duration seconds ends with
+    one line per camera."""
+    done = run("--camera", "top=fake:64x48@30", "--camera", "wrist=fake:64x48@30,drop_every=10", "--duration", "3")
+    assert done.returncode == 0, done.stderr
+    lines = {line.split(":", 1)[0]: line for line in done.stdout.splitlines() if ": " in line and "frames in" in line}
+    top = re.match(r"top: (\d+) frames in ([\d.]+) s \(([\d.]+) fps\), (\d+) dropped by the camera, 0 broken", lines["top"])
+    assert top is not None, done.stdout
+    assert 25.0 <= float(top.group(3)) <= 35.0 and top.group(4) == "0", lines["top"]
+    p50, p99 = map(float, re.search(r"latency p50 ([\d.]+) ms, p99 ([\d.]+) ms", lines["top"]).groups())
+    assert 0.0 <= p50 <= p99 < 100.0, lines["top"]
+    wrist = re.search(r"(\d+) dropped by the camera", lines["wrist"])
+    assert wrist is not None and int(wrist.group(1)) >= 5, lines["wrist"]

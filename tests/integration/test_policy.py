@@ -1,8 +1,9 @@
 """The loop back from LeRobot: a tiny ACT policy, built from its config and trained for a few steps
 on the CPU by lerobot-train on a dataset converted from expert bags, runs through
 so101-run-policy: an evaluation episode on its own sim in lockstep (eval_info.json, an MP4 that
-PyAV decodes frame for frame) and live against a running sim (commands at the policy's fps, inside
-the joint limits); a bad policy and a missing camera are reported, not fatal to the arm."""
+PyAV decodes frame for frame), live against a running sim (commands at the policy's fps, inside
+the joint limits) and on the driver with so101_camera_node's JPEG frames (the real arm, emulated);
+a bad policy and a missing camera are reported, not fatal to the arm."""
 
 from __future__ import annotations
 
@@ -15,7 +16,7 @@ import sys
 from pathlib import Path
 
 import numpy as np
-from harness import TINY_ACT, best_effort_qos, reliable_qos, wait_until
+from harness import TINY_ACT, SimNode, best_effort_qos, node_binary, reliable_qos, wait_until
 
 JOINTS = ["shoulder_pan", "shoulder_lift", "elbow_flex", "wrist_flex", "wrist_roll", "gripper"]
 LIMITS = [(-1.9199, 1.9199), (-1.7453, 1.7453), (-1.69, 1.69), (-1.6581, 1.6581), (-2.7438, 2.8412), (-0.1745, 1.7453)]
@@ -140,9 +141,14 @@ def test_a_tiny_act_trained_on_a_converted_dataset_runs_through_the_runner(
     low, high = np.array(LIMITS).T
     assert np.all(positions >= low - 1e-9) and np.all(positions <= high + 1e-9), "a command outside the joint limits"
 
-    # Unchanged against the physical arm's driver (on the servo-bus emulator), the cameras taken
-    # from the sim's topics: the arm follows the policy.
+    # Unchanged against the physical arm's driver (on the servo-bus emulator) and its cameras
+    # (so101_camera_node serving two fake cameras, their JPEG frames): the arm follows the policy.
     arm, _emulator = arm_factory()
+    cameras = SimNode(
+        node_binary("so101_camera_node"),
+        ["--camera", "top=fake:64x48@30", "--camera", "wrist=fake:yuyv,64x48@30"],
+        tmp_path / "camera_node.log",
+    )
     states = ros.subscribe("/joint_states", JointState, best_effort_qos())
     first = states.next_message(20.0, arm)
     before = np.array([dict(zip(first.name, first.position))[j] for j in JOINTS])
@@ -152,15 +158,14 @@ def test_a_tiny_act_trained_on_a_converted_dataset_runs_through_the_runner(
             checkpoint,
             "--duration",
             "3",
-            "--camera",
-            "top=/live/camera/top/image_raw",
-            "--camera",
-            "wrist=/live/camera/wrist/image_raw",
+            "--compressed",
         ],
         timeout=120,
     )
     assert done.returncode == 0, done.stdout[-3000:] + done.stderr[-3000:]
     arm.assert_alive()
+    cameras.assert_alive()
+    assert cameras.stop() == 0, cameras.log_tail()
     after = np.array([dict(zip(states.latest().name, states.latest().position))[j] for j in JOINTS])
     assert np.abs(after - before).max() > 0.05, f"the driven arm did not move: {before} -> {after}"
 

@@ -243,9 +243,8 @@ impl Camera {
                 data: jpeg,
             })
             .is_ok();
-        let mut status = self.status();
-        status.frames += 1;
-        status.latency_ms = monotonic_now().saturating_sub(frame.captured).as_secs_f64() * 1e3;
+        let latency = monotonic_now().saturating_sub(frame.captured);
+        self.status().published(latency.as_secs_f64() * 1e3);
         if !ok {
             tracing::debug!(camera = %self.request.name, "publishing a frame failed");
         }

@@ -36,7 +36,7 @@ use crate::{
     messages::{now_since_epoch, stamp_of},
     modes,
     request::{CameraRequest, DeviceName},
-    status::{diagnostic, CameraStatus},
+    status::{diagnostic, summary, CameraStatus},
     v4l2::{discovery, V4l2Camera},
 };
 
@@ -220,6 +220,7 @@ pub fn run(args: Args) -> Result<()> {
         statuses.push((status, 0_u64));
         workers.push(thread::spawn(move || camera.serve(stream)));
     }
+    let started = Instant::now();
     let deadline = args
         .duration
         .map(|s| Instant::now() + Duration::from_secs_f64(s.max(0.0)));
@@ -260,6 +261,14 @@ pub fn run(args: Args) -> Result<()> {
     shutdown.request();
     for worker in workers {
         let _ = worker.join();
+    }
+    // What each camera did, for a user checking a camera (`--duration 10`).
+    let elapsed = started.elapsed();
+    for (status, _) in &statuses {
+        let status = status.lock().unwrap_or_else(PoisonError::into_inner);
+        let line = summary(&status, elapsed);
+        tracing::info!("{line}");
+        println!("{line}");
     }
     Ok(())
 }

@@ -2,7 +2,54 @@
 
 use so101_msgs::diagnostic_msgs::{DiagnosticStatus, KeyValue};
 
+use std::{collections::VecDeque, time::Duration};
+
 use crate::controls::ControlKind;
+
+/// Latencies kept for the summary: five and a half minutes at 30 fps.
+pub const LATENCY_SAMPLES: usize = 10_000;
+
+impl CameraStatus {
+    /// Counts one published frame, captured `latency_ms` before it went out.
+    pub fn published(&mut self, latency_ms: f64) {
+        self.frames += 1;
+        self.latency_ms = latency_ms;
+        if self.latencies_ms.len() == LATENCY_SAMPLES {
+            self.latencies_ms.pop_front();
+        }
+        self.latencies_ms.push_back(latency_ms);
+    }
+}
+
+/// The `q` quantile (0..=1) of `values`, or None for none.
+pub fn quantile(values: &VecDeque<f64>, q: f64) -> Option<f64> {
+    let mut sorted: Vec<f64> = values.iter().copied().collect();
+    sorted.sort_by(f64::total_cmp);
+    let last = sorted.len().checked_sub(1)?;
+    Some(sorted[((last as f64) * q).round() as usize])
+}
+
+/// One line on a camera's run, printed at exit: what a user checks a camera with.
+pub fn summary(status: &CameraStatus, elapsed: Duration) -> String {
+    let seconds = elapsed.as_secs_f64().max(1e-9);
+    let latency = match (
+        quantile(&status.latencies_ms, 0.5),
+        quantile(&status.latencies_ms, 0.99),
+    ) {
+        (Some(p50), Some(p99)) => format!("latency p50 {p50:.1} ms, p99 {p99:.1} ms"),
+        _ => "no latency (no frame)".to_owned(),
+    };
+    format!(
+        "{}: {} frames in {seconds:.1} s ({:.1} fps), {} dropped by the camera, {} broken, {} stalls, {} unplugs; capture to publish {latency}",
+        status.name,
+        status.frames,
+        status.frames as f64 / seconds,
+        status.device_drops,
+        status.broken_frames,
+        status.timeouts,
+        status.unplugs,
+    )
+}
 
 /// One camera's counters and state.
 #[derive(Debug, Clone, Default, PartialEq)]
@@ -24,6 +71,8 @@ pub struct CameraStatus {
     pub unplugs: u64,
     /// Capture to publish of the last frame, ms.
     pub latency_ms: f64,
+    /// Capture to publish of the latest frames (up to [`LATENCY_SAMPLES`]), ms, for the summary.
+    pub latencies_ms: VecDeque<f64>,
     /// The image controls as the camera reports them (-1: automatic).
     pub controls: Vec<(ControlKind, i64)>,
 }
@@ -89,5 +138,29 @@ mod tests {
         assert_eq!(gone.level, DiagnosticStatus::ERROR);
         assert_eq!(gone.message, "unplugged: reopening");
         assert_eq!(gone.name, "so101_camera_node: top");
+    }
+
+    #[test]
+    fn the_summary_says_rate_losses_and_latency_quantiles() {
+        let mut status = CameraStatus {
+            name: "top".into(),
+            device_drops: 2,
+            ..CameraStatus::default()
+        };
+        for latency in 1..=100 {
+            status.published(f64::from(latency));
+        }
+        let line = summary(&status, Duration::from_secs(4));
+        assert!(
+            line.starts_with("top: 100 frames in 4.0 s (25.0 fps), 2 dropped by the camera"),
+            "{line}"
+        );
+        assert!(line.contains("latency p50 51.0 ms, p99 99.0 ms"), "{line}");
+        let idle = summary(&CameraStatus::default(), Duration::from_secs(1));
+        assert!(idle.contains("no latency"), "{idle}");
+        for latency in 0..LATENCY_SAMPLES + 5 {
+            status.published(latency as f64);
+        }
+        assert_eq!(status.latencies_ms.len(), LATENCY_SAMPLES);
     }
 }

@@ -1,4 +1,6 @@
-//! The live bridge: the stack's topics -> [`Bridge`], until a signal or --duration.
+//! The live bridge: the stack's topics -> [`Bridge`], until a signal or --duration. A camera is
+//! shown from its rgb8 frames (image_raw) where it has them, else from its JPEG frames
+//! (image_raw/compressed: so101_camera_node's by default).
 
 use so101_core::contract::topics;
 use std::time::{Duration, Instant};
@@ -9,7 +11,7 @@ use so101_core::ros::parameters::{ParameterServer, Parameters};
 use so101_core::ros::shutdown::Shutdown;
 use so101_core::ros::{qos, NodeArgs, RosNode};
 use so101_msgs::geometry_msgs::PoseStamped;
-use so101_msgs::sensor_msgs::{Image, JointState};
+use so101_msgs::sensor_msgs::{CompressedImage, Image, JointState};
 use so101_msgs::std_msgs::{Bool, Float64};
 
 use crate::bridge::Bridge;
@@ -20,7 +22,15 @@ struct Topics {
     cube: Subscription<PoseStamped>,
     reward: Subscription<Float64>,
     success: Subscription<Bool>,
-    cameras: Vec<(String, Subscription<Image>)>,
+    cameras: Vec<CameraTopics>,
+}
+
+struct CameraTopics {
+    name: String,
+    raw: Subscription<Image>,
+    compressed: Subscription<CompressedImage>,
+    /// Whether raw frames came: then the JPEG frames of the same instants are not logged again.
+    raw_seen: bool,
 }
 
 /// Logs what the stack publishes until `shutdown` or `duration` (s).
@@ -33,7 +43,7 @@ pub fn run(
     shutdown: &Shutdown,
 ) -> Result<()> {
     let mut node = RosNode::start("so101_rerun_bridge", node_args)?;
-    let topics = Topics {
+    let mut topics = Topics {
         joint_states: node.subscription(topics::JOINT_STATES, qos::reliable(100))?,
         commands: node.subscription(topics::JOINT_COMMANDS, qos::reliable(100))?,
         cube: node.subscription(topics::CUBE_POSE, qos::reliable(100))?,
@@ -42,10 +52,16 @@ pub fn run(
         cameras: cameras
             .iter()
             .map(|name| {
-                Ok((
-                    name.clone(),
-                    node.subscription(&format!("camera/{name}/image_raw"), qos::reliable(4))?,
-                ))
+                Ok(CameraTopics {
+                    name: name.clone(),
+                    raw: node
+                        .subscription(&topics::camera(name, topics::IMAGE_RAW), qos::reliable(4))?,
+                    compressed: node.subscription(
+                        &topics::camera(name, topics::IMAGE_COMPRESSED),
+                        qos::reliable(4),
+                    )?,
+                    raw_seen: false,
+                })
             })
             .collect::<Result<_>>()?,
     };
@@ -80,9 +96,16 @@ pub fn run(
             bridge.success(message.data)?;
             idle = false;
         }
-        for (name, subscription) in &topics.cameras {
-            while let Ok(Some((message, _))) = subscription.take() {
-                bridge.image(name, &message)?;
+        for camera in &mut topics.cameras {
+            while let Ok(Some((message, _))) = camera.raw.take() {
+                camera.raw_seen = true;
+                bridge.image(&camera.name, &message)?;
+                idle = false;
+            }
+            while let Ok(Some((message, _))) = camera.compressed.take() {
+                if !camera.raw_seen {
+                    bridge.compressed_image(&camera.name, &message)?;
+                }
                 idle = false;
             }
         }

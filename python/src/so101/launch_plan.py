@@ -147,6 +147,9 @@ def plan(args) -> list[NodeSpec]:
         else:
             sink_args = ["--save", sink]
         # Only the bridge subscribes to the task's reward this early (the recorder starts after it).
+        if args.camera:
+            # The real cameras by their names (the default is the sim's).
+            sink_args += ["--cameras", ",".join(request.split("=", 1)[0] for request in args.camera)]
         specs.append(
             NodeSpec("so101_rerun", [str(node_binary("so101_rerun")), "live", *sink_args, *ns], ready="subscriber /task/reward")
         )

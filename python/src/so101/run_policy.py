@@ -41,7 +41,7 @@ class LiveInputs:
     def __init__(self, node, prefix: str, cameras: dict[str, str], cube_pose: bool = False):
         from geometry_msgs.msg import PoseStamped
         from rclpy.qos import qos_profile_sensor_data
-        from sensor_msgs.msg import Image, JointState
+        from sensor_msgs.msg import CompressedImage, Image, JointState
 
         self.state: tuple[float, object] | None = None
         self.cube: tuple[float, object] | None = None
@@ -54,7 +54,9 @@ class LiveInputs:
         # Best effort matches reliable and best-effort writers; only the newest message matters.
         node.create_subscription(JointState, f"{prefix}/{contract.JOINT_STATES}", self._on_state, qos_profile_sensor_data)
         for name, topic in cameras.items():
-            node.create_subscription(Image, topic, lambda msg, name=name: self._on_frame(name, msg), qos_profile_sensor_data)
+            # A camera's JPEG frames (so101_camera_node publishes those by default) or its rgb8 ones.
+            kind = CompressedImage if topic.endswith("/compressed") else Image
+            node.create_subscription(kind, topic, lambda msg, name=name: self._on_frame(name, msg), qos_profile_sensor_data)
 
     def _on_state(self, msg) -> None:
         if joint_positions(msg) is not None:
@@ -82,7 +84,8 @@ def run_live(args, policy: StackPolicy) -> int:
     from std_srvs.srv import Trigger
 
     prefix = "/" + args.namespace.strip("/") if args.namespace.strip("/") else ""
-    topics = {camera.name: f"{prefix}/{contract.camera_topic(camera.name)}" for camera in policy.cameras}
+    leaf = contract.IMAGE_COMPRESSED if args.compressed else contract.IMAGE_RAW
+    topics = {camera.name: f"{prefix}/{contract.camera_topic(camera.name, leaf)}" for camera in policy.cameras}
     topics.update(dict(item.split("=", 1) for item in args.camera))
     rclpy.init()
     node = rclpy.create_node("so101_policy_runner")
@@ -249,7 +252,14 @@ def parser() -> argparse.ArgumentParser:
         action="append",
         default=[],
         metavar="NAME=TOPIC",
-        help="take the policy's camera NAME from TOPIC (default /camera/NAME/image_raw)",
+        help="take the policy's camera NAME from TOPIC (default /camera/NAME/image_raw; a TOPIC ending in "
+        "/compressed carries JPEG frames)",
+    )
+    live.add_argument(
+        "--compressed",
+        action="store_true",
+        help="take every camera's JPEG frames from /camera/NAME/image_raw/compressed (what so101_camera_node "
+        "publishes unless started with --raw)",
     )
     live.add_argument("--duration", type=float, default=0.0, help="stop after this many seconds (0: at Ctrl-C)")
     live.add_argument("--max-age", type=float, default=0.5, help="inputs older than this (s) hold the arm")
