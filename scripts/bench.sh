@@ -6,6 +6,7 @@
 #   scripts/bench.sh driver [--repeats N] [--seconds S] [--baud B] [--json FILE]
 #   scripts/bench.sh recorder [--seconds S] [--sweep-seconds S] [--rates HZ,...] [--repeats N] [--workdir DIR] [--json FILE]
 #   scripts/bench.sh cameras [--repeats N] [--seconds S] [--frames N] [--json FILE]
+#   scripts/bench.sh camera_node [--repeats N] [--seconds S] [--warmup S] [--json FILE]
 #   scripts/bench.sh expert [--episodes N] [--speed S] [--seed N] [--json FILE]
 #   scripts/bench.sh convert [--episodes N] [--sizes WxH,...] [--json FILE]
 #   scripts/bench.sh storage [--qualities Q,...] [--episodes N] [--long-minutes M] [--converter-src DIR] [--json FILE]
@@ -19,7 +20,7 @@ run() {
         --bin-dir "${CARGO_TARGET_DIR}/release" "${@:2}"
 }
 case "${1:-all}" in
-    sim | sim_core | driver | recorder | cameras | expert | convert | storage) run "$@" ;;
-    all) run sim && run sim_core && run driver && run recorder && run cameras && run expert && run convert && run storage ;;
-    *) echo "usage: scripts/bench.sh [sim|sim_core|driver|recorder|cameras|expert|convert|storage] [ARGS...]" >&2; exit 2 ;;
+    sim | sim_core | driver | recorder | cameras | camera_node | expert | convert | storage) run "$@" ;;
+    all) run sim && run sim_core && run driver && run recorder && run cameras && run camera_node && run expert && run convert && run storage ;;
+    *) echo "usage: scripts/bench.sh [sim|sim_core|driver|recorder|cameras|camera_node|expert|convert|storage] [ARGS...]" >&2; exit 2 ;;
 esac

@@ -92,3 +92,16 @@ def test_terminal_bytes_become_keys():
     # Up arrow, F5, letters: not session keys.
     assert decode_keys(b"\x1b[A\x1b[15~xyz") == []
     assert decode_keys(b"\x1b\x1b[C") == [Key.STOP, Key.NEXT]
+
+
+def test_without_a_count_episodes_go_on_until_esc():
+    s = Session(episodes=0, episode_time=1.0, reset_time=1.0)
+    said = [action.say for action in s.begin(0.0) if action.say]
+    assert said == ["recording episode 1 (1 s)"]
+    now = 0.0
+    for _ in range(10):
+        now += 1.0
+        s.tick(now)
+    assert not s.done and s.recorded == 5
+    s.key(Key.STOP, now)
+    assert s.done

@@ -110,6 +110,8 @@ pub struct Camera {
     pub control_changes: Receiver<(ControlKind, Setting)>,
     pub status: Arc<Mutex<CameraStatus>>,
     pub shutdown: Shutdown,
+    /// 1 / the mode's rate: a frame published later than this after its capture is late.
+    pub frame_period: Duration,
 }
 
 impl Camera {
@@ -151,6 +153,7 @@ impl Camera {
                         return;
                     };
                     (stream, last_sequence) = (reopened, None);
+                    self.frame_period = Duration::from_secs_f64(1.0 / mode.fps);
                     tracing::info!(camera = %self.request.name, %mode, "camera back");
                     self.report_controls(stream.as_mut());
                     let mut status = self.status();
@@ -244,7 +247,12 @@ impl Camera {
             })
             .is_ok();
         let latency = monotonic_now().saturating_sub(frame.captured);
-        self.status().published(latency.as_secs_f64() * 1e3);
+        let mut status = self.status();
+        status.published(latency.as_secs_f64() * 1e3);
+        if latency > self.frame_period {
+            status.late_frames += 1;
+        }
+        drop(status);
         if !ok {
             tracing::debug!(camera = %self.request.name, "publishing a frame failed");
         }

@@ -6,7 +6,8 @@
 //! - `drop_every=N`: every Nth frame is lost in the device (its sequence number skips one);
 //! - `truncate_every=N`: every Nth frame arrives cut short (no JPEG end);
 //! - `stall_at=K:SECONDS`: after frame K, no frame for SECONDS;
-//! - `unplug_at=K:SECONDS`: after frame K, the camera is gone for SECONDS, then back.
+//! - `unplug_at=K:SECONDS`: after frame K, the camera is gone for SECONDS, then back;
+//! - `textured`: fine noise on the picture, so its JPEGs are as large as a webcam's (benchmarks).
 //!
 //! Its image controls: exposure (1..=5000, automatic at first), gain (0..=100, 32 at first) and
 //! white balance (2800..=6500 K, automatic at first); no focus control, as many webcams. Like a
@@ -37,6 +38,8 @@ pub struct FakeSettings {
     pub truncate_every: Option<u32>,
     pub stall: Option<(u32, Duration)>,
     pub unplug: Option<(u32, Duration)>,
+    /// Fine noise on the picture, so its JPEGs are as large as a webcam's (benchmarks).
+    pub textured: bool,
 }
 
 impl Default for FakeSettings {
@@ -50,6 +53,7 @@ impl Default for FakeSettings {
             truncate_every: None,
             stall: None,
             unplug: None,
+            textured: false,
         }
     }
 }
@@ -64,6 +68,7 @@ impl std::str::FromStr for FakeSettings {
             match item.split_once('=') {
                 None if item == "mjpeg" => settings.format = PixelFormat::Mjpeg,
                 None if item == "yuyv" => settings.format = PixelFormat::Yuyv,
+                None if item == "textured" => settings.textured = true,
                 None => {
                     let (size, fps) = item.split_once('@').ok_or_else(bad)?;
                     let (width, height) = size.split_once('x').ok_or_else(bad)?;
@@ -116,6 +121,17 @@ pub fn picture(width: u32, height: u32, sequence: u32) -> Vec<u8> {
         }
     }
     rgb
+}
+
+/// Adds a fixed pseudo-random pattern of +-4 to every byte (a hash of its index): the fine detail
+/// of a webcam's picture: its 640x480 JPEG takes about 54 kB (a webcam's are 30-80 kB), the smooth
+/// picture's 25 kB.
+pub fn texture(rgb: &mut [u8]) {
+    for (index, byte) in rgb.iter_mut().enumerate() {
+        let hash = (index as u32).wrapping_mul(2_654_435_761).rotate_right(13);
+        let offset = (hash % 9) as i32 - 4;
+        *byte = (i32::from(*byte) + offset).clamp(0, 255) as u8;
+    }
 }
 
 /// rgb8 as packed YUYV 4:2:2 (BT.601, full range), chroma from each pixel pair's mean.
@@ -198,6 +214,7 @@ impl CameraDevice for FakeCamera {
             next: 0,
             pause_until: None,
             controls: fake_controls(),
+            encoded: vec![None; PICTURES],
         }))
     }
 }
@@ -210,7 +227,13 @@ struct FakeStream {
     next: u32,
     pause_until: Option<Duration>,
     controls: Vec<ControlState>,
+    /// Each picture's bytes, encoded once: serving a frame then costs a copy, so a benchmark of
+    /// the node measures the node.
+    encoded: Vec<Option<Vec<u8>>>,
 }
+
+/// Distinct pictures: blue is `sequence * 8 mod 256`.
+const PICTURES: usize = 32;
 
 /// The fake's controls as it powers up.
 fn fake_controls() -> Vec<ControlState> {
@@ -234,10 +257,41 @@ impl FakeStream {
         self.pause_until.map_or(due, |until| due.max(until))
     }
 
-    fn frame(&self, sequence: u32, captured: Duration) -> Frame {
-        let s = &self.camera.settings;
-        let rgb = picture(self.mode.width, self.mode.height, sequence);
-        let mut data = match self.mode.format {
+    fn frame(&mut self, sequence: u32, captured: Duration) -> Frame {
+        let slot = sequence as usize % PICTURES;
+        let mut data = match &self.encoded[slot] {
+            Some(bytes) => bytes.clone(),
+            None => {
+                let bytes = self.encode(sequence);
+                self.encoded[slot] = Some(bytes.clone());
+                bytes
+            }
+        };
+        if self
+            .camera
+            .settings
+            .truncate_every
+            .is_some_and(|n| sequence % n == n - 1)
+        {
+            data.truncate(data.len() * 2 / 3);
+        }
+        Frame {
+            data,
+            format: self.mode.format,
+            width: self.mode.width,
+            height: self.mode.height,
+            captured,
+            sequence,
+        }
+    }
+
+    /// The bytes of frame `sequence`'s picture in the stream's format.
+    fn encode(&self, sequence: u32) -> Vec<u8> {
+        let mut rgb = picture(self.mode.width, self.mode.height, sequence);
+        if self.camera.settings.textured {
+            texture(&mut rgb);
+        }
+        match self.mode.format {
             PixelFormat::Yuyv => yuyv_from_rgb(&rgb),
             PixelFormat::Mjpeg => {
                 let mut jpeg = Vec::new();
@@ -250,17 +304,6 @@ impl FakeStream {
                 );
                 jpeg
             }
-        };
-        if s.truncate_every.is_some_and(|n| sequence % n == n - 1) {
-            data.truncate(data.len() * 2 / 3);
-        }
-        Frame {
-            data,
-            format: self.mode.format,
-            width: self.mode.width,
-            height: self.mode.height,
-            captured,
-            sequence,
         }
     }
 }
@@ -316,6 +359,27 @@ impl CameraStream for FakeStream {
 
 #[cfg(test)]
 mod tests {
+    #[test]
+    fn a_textured_picture_makes_a_webcam_sized_jpeg() {
+        let (_, mut stream) = open("640x480@30,textured");
+        let textured = stream
+            .next_frame(Duration::from_secs(1))
+            .unwrap()
+            .data
+            .len();
+        let (_, mut stream) = open("640x480@30");
+        let smooth = stream
+            .next_frame(Duration::from_secs(1))
+            .unwrap()
+            .data
+            .len();
+        assert!((30_000..150_000).contains(&textured), "{textured} bytes");
+        assert!(
+            smooth * 3 / 2 < textured,
+            "{smooth} against {textured} bytes"
+        );
+    }
+
     use super::*;
     use crate::{jpeg::whole_jpeg, modes::choose};
 
@@ -395,6 +459,7 @@ mod tests {
     #[test]
     fn settings_are_checked() {
         assert_eq!("".parse::<FakeSettings>(), Ok(FakeSettings::default()));
+        assert!("textured".parse::<FakeSettings>().unwrap().textured);
         for bad in [
             "65x48@30",
             "64x48",

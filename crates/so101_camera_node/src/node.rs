@@ -216,6 +216,7 @@ pub fn run(args: Args) -> Result<()> {
             control_changes,
             status: Arc::clone(&status),
             shutdown: shutdown.clone(),
+            frame_period: Duration::from_secs_f64(1.0 / mode.fps),
         };
         statuses.push((status, 0_u64));
         workers.push(thread::spawn(move || camera.serve(stream)));

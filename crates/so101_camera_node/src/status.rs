@@ -40,12 +40,13 @@ pub fn summary(status: &CameraStatus, elapsed: Duration) -> String {
         _ => "no latency (no frame)".to_owned(),
     };
     format!(
-        "{}: {} frames in {seconds:.1} s ({:.1} fps), {} dropped by the camera, {} broken, {} stalls, {} unplugs; capture to publish {latency}",
+        "{}: {} frames in {seconds:.1} s ({:.1} fps), {} dropped by the camera, {} broken, {} late, {} stalls, {} unplugs; capture to publish {latency}",
         status.name,
         status.frames,
         status.frames as f64 / seconds,
         status.device_drops,
         status.broken_frames,
+        status.late_frames,
         status.timeouts,
         status.unplugs,
     )
@@ -63,13 +64,15 @@ pub struct CameraStatus {
     pub frames: u64,
     /// Frames lost in the device (gaps in its sequence numbers).
     pub device_drops: u64,
+    /// Frames published more than a frame period after their capture.
+    pub late_frames: u64,
     /// Frames dropped here because they were not a whole JPEG.
     pub broken_frames: u64,
     /// Waits for a frame that timed out (a stalled camera).
     pub timeouts: u64,
     /// Times the camera went away.
     pub unplugs: u64,
-    /// Capture to publish of the last frame, ms.
+    /// Capture to publish of the last frame, ms (late: over a frame period).
     pub latency_ms: f64,
     /// Capture to publish of the latest frames (up to [`LATENCY_SAMPLES`]), ms, for the summary.
     pub latencies_ms: VecDeque<f64>,
@@ -99,6 +102,7 @@ pub fn diagnostic(status: &CameraStatus, fps: f64) -> DiagnosticStatus {
         value("frames", status.frames.to_string()),
         value("device_drops", status.device_drops.to_string()),
         value("broken_frames", status.broken_frames.to_string()),
+        value("late_frames", status.late_frames.to_string()),
         value("timeouts", status.timeouts.to_string()),
         value("unplugs", status.unplugs.to_string()),
         value("latency_ms", format!("{:.2}", status.latency_ms)),

@@ -355,7 +355,7 @@ def main(argv: list[str] | None = None) -> int:
             session = record_session.SessionRunner(
                 launch.graph_node(),
                 launch.prefix,
-                record_session.Session(args.episodes or sys.maxsize, args.episode_time, args.reset_time),
+                record_session.Session(args.episodes, args.episode_time, args.reset_time),
                 sim=args.robot == "sim",
                 keys=keys,
             )

@@ -77,7 +77,7 @@ class Action:
 
 @dataclass
 class Session:
-    episodes: int
+    episodes: int  # 0: until Esc
     episode_time: float
     reset_time: float
     phase: Phase = Phase.DONE
@@ -99,7 +99,9 @@ class Session:
         return [
             Action(reset_sim=True),
             Action(recorder="start"),
-            Action(say=f"recording episode {self.recorded + 1} of {self.episodes} ({self.episode_time:g} s)"),
+            Action(
+                say=f"recording episode {self.recorded + 1}{f' of {self.episodes}' if self.episodes else ''} ({self.episode_time:g} s)"
+            ),
         ]
 
     def _reset(self, now: float, why: str) -> list[Action]:
@@ -109,7 +111,7 @@ class Session:
     def _end_episode(self, now: float) -> list[Action]:
         self.recorded += 1
         actions = [Action(recorder="stop")]
-        if self.recorded >= self.episodes:
+        if self.episodes and self.recorded >= self.episodes:
             self.phase = Phase.DONE
             return [*actions, Action(say=f"recorded {self.recorded} episodes")]
         self.last_droppable = True

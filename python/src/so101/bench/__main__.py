@@ -6,7 +6,7 @@ from __future__ import annotations
 import importlib
 import sys
 
-BENCHMARKS = ("sim", "sim_core", "driver", "recorder", "cameras", "expert", "convert", "storage", "latency")
+BENCHMARKS = ("sim", "sim_core", "driver", "recorder", "cameras", "camera_node", "expert", "convert", "storage", "latency")
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -1,0 +1,76 @@
+//! camera_latency_probe: a Rust subscriber of one camera's JPEG frames for the camera benchmark
+//! (so101-bench camera_node): for --seconds it receives camera/NAME/image_raw/compressed and
+//! prints, as one JSON line, how many frames came and their capture-to-subscriber latency (the
+//! instant each arrived minus its header stamp, the capture instant), p50 and p99 in ms.
+
+use std::{
+    process::ExitCode,
+    time::{Duration, Instant, SystemTime, UNIX_EPOCH},
+};
+
+use anyhow::Result;
+use clap::Parser;
+use so101_core::{
+    contract::topics,
+    ros::{logging, qos, NodeArgs, RosNode},
+};
+use so101_msgs::sensor_msgs::CompressedImage;
+
+/// Receives one camera's JPEG frames for --seconds and prints their count and capture-to-subscriber
+/// latency (p50, p99) as JSON.
+#[derive(Debug, Parser)]
+#[command(version, about, long_about = None)]
+struct Args {
+    /// The camera's name (camera/NAME/image_raw/compressed).
+    #[arg(long, default_value = "top")]
+    camera: String,
+    /// How long to receive, s (after the first frame).
+    #[arg(long, default_value_t = 10.0)]
+    seconds: f64,
+    #[command(flatten)]
+    node: NodeArgs,
+}
+
+fn main() -> ExitCode {
+    logging::init();
+    logging::exit_code(run(Args::parse()))
+}
+
+fn run(args: Args) -> Result<()> {
+    let mut node = RosNode::start("camera_latency_probe", &args.node)?;
+    let frames = node.subscription::<CompressedImage>(
+        &topics::camera(&args.camera, topics::IMAGE_COMPRESSED),
+        qos::default_topic(),
+    )?;
+    let mut latencies_ms: Vec<f64> = Vec::new();
+    let mut first: Option<Instant> = None;
+    let give_up = Instant::now() + Duration::from_secs(60);
+    while first.is_none_or(|at| at.elapsed().as_secs_f64() < args.seconds)
+        && Instant::now() < give_up
+    {
+        match frames.take() {
+            Ok(Some((message, _))) => {
+                let now = SystemTime::now().duration_since(UNIX_EPOCH)?.as_secs_f64();
+                let stamp = f64::from(message.header.stamp.sec)
+                    + f64::from(message.header.stamp.nanosec) * 1e-9;
+                first.get_or_insert_with(Instant::now);
+                latencies_ms.push((now - stamp) * 1e3);
+            }
+            _ => std::thread::sleep(Duration::from_micros(200)),
+        }
+    }
+    latencies_ms.sort_by(f64::total_cmp);
+    let quantile = |q: f64| {
+        latencies_ms
+            .len()
+            .checked_sub(1)
+            .map(|last| latencies_ms[((last as f64) * q).round() as usize])
+    };
+    println!(
+        "{{\"frames\": {}, \"p50_ms\": {}, \"p99_ms\": {}}}",
+        latencies_ms.len(),
+        quantile(0.5).map_or("null".into(), |v| format!("{v:.3}")),
+        quantile(0.99).map_or("null".into(), |v| format!("{v:.3}")),
+    );
+    Ok(())
+}
