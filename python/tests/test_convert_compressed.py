@@ -130,6 +130,10 @@ def test_corrupt_frames_are_reported_and_only_their_episode_or_part_is_left_out(
     assert summary.startswith("6 episode(s)"), summary
 
 
+# so101.resample: frame 0 is half a frame after every stream has started.
+GRID_OFFSET = 0.5 / FPS
+
+
 @pytest.mark.parametrize(
     ("index", "source", "start"),
     [(0, 0, 0.05), (1, 1, 0.05), (2, 2, 0.05), (3, 5, 0.05), (4, 6, 2.0), (5, 7, 0.05)],
@@ -143,11 +147,12 @@ def test_frames_are_the_recorded_frames_a_whole_episode_resampling_picks(convert
     first, last = dataset.meta.episodes["dataset_from_index"][index], dataset.meta.episodes["dataset_to_index"][index]
     assert last - first >= 25
     frames = dataset.hf_dataset.with_format("numpy")[first:last]
-    # The state's first joint is the joint state's index / 1000 (100 Hz): frame j at start + j / FPS, held.
+    # The state's first joint is the joint state's index / 1000 (100 Hz): frame j at start + half a
+    # frame + j / FPS, held.
     states = np.arange(int(round(expected[source]["end"] * 100)) + 1) / 100
-    held = [np.searchsorted(states, start + j / FPS + 1e-9, side="right") - 1 for j in range(last - first)]
+    held = [np.searchsorted(states, start + GRID_OFFSET + j / FPS + 1e-9, side="right") - 1 for j in range(last - first)]
     np.testing.assert_allclose(np.stack(frames["observation.state"])[:, 0], np.array(held) / 1000, atol=1e-7)
-    want = reference(expected[source], start, last - first)
+    want = reference(expected[source], start + GRID_OFFSET, last - first)
     for camera in ("top", "wrist"):
         got = np.stack([np.asarray(dataset[first + j][f"observation.images.{camera}"]) for j in range(last - first)])
         got = np.round(got.transpose(0, 2, 3, 1) * 255).astype(np.uint8)

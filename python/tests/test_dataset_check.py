@@ -20,7 +20,7 @@ from so101.dataset_check import Finding, check_dataset
 from so101.dataset_check import main as check_main
 
 FPS = 30
-SECONDS = 1.0  # per episode: 32 frames (the last messages held one frame)
+SECONDS = 1.0  # per episode: 31 frames (from half a frame after the start; the last messages held one frame)
 DATA = "data/chunk-000/file-000.parquet"
 VIDEO = "videos/observation.images.top/chunk-000/file-000.mp4"
 
@@ -66,7 +66,7 @@ def test_the_converter_checks_its_dataset_and_it_is_clean(converted):
     status, summary, output = converted
     assert status == 0, summary
     assert "check: " not in summary, summary
-    assert f"check {output}: 2 episode(s), 64 frames, 64 video frames decoded: clean" in summary, summary
+    assert f"check {output}: 2 episode(s), 62 frames, 62 video frames decoded: clean" in summary, summary
     assert findings_of(output) == []
 
 
@@ -110,7 +110,7 @@ def test_a_timestamp_shifted_beyond_the_tolerance_is_reported(copy):
     assert "2 step(s) off 1/fps" in timing[0].details and "frame 9 -> 10" in timing[0].details
     # The shifted frame has no video frame at its time either.
     video = [f for f in findings if f.what == "video"]
-    assert len(video) == 1 and video[0].episode == 0 and "1 of 32 frame(s) have no decoded frame" in video[0].details
+    assert len(video) == 1 and video[0].episode == 0 and "1 of 31 frame(s) have no decoded frame" in video[0].details
     assert {f.episode for f in findings} == {0}
 
 
@@ -131,7 +131,7 @@ def test_a_truncated_video_is_reported_for_the_episodes_it_lost(copy):
     assert findings, "a video cut in half passed"
     assert all(f.what == "video" and "observation.images.top" in f.details for f in findings), findings
     assert 1 in {f.episode for f in findings}  # the second episode lies in the lost half
-    assert any("frame(s) decoded in" in f.details and "expected 32" in f.details for f in findings), findings
+    assert any("frame(s) decoded in" in f.details and "expected 31" in f.details for f in findings), findings
 
 
 def test_a_garbled_video_is_reported_for_every_episode(copy):
@@ -156,13 +156,13 @@ def test_stats_missing_a_feature_are_reported(copy):
 
 def test_an_episode_missing_frames_is_reported(copy):
     def drop_last(data):
-        last = data.index[(data["episode_index"] == 0) & (data["frame_index"] == 31)][0]
+        last = data.index[(data["episode_index"] == 0) & (data["frame_index"] == 30)][0]
         data.drop(index=last, inplace=True)
 
     write_data(copy, drop_last)
     findings = findings_of(copy)
-    assert Finding(0, "length", "meta length 32, dataset_from/to_index span 32, 31 rows in data/") in findings, findings
-    # The video still holds 32 frames for it, the data 31: reported as well.
+    assert Finding(0, "length", "meta length 31, dataset_from/to_index span 31, 30 rows in data/") in findings, findings
+    # The video still holds 31 frames for it, the data 30: reported as well.
     assert all(f.episode == 0 for f in findings), findings
 
 

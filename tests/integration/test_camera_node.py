@@ -302,3 +302,17 @@ def test_a_timed_run_ends_with_each_camera_s_rate_losses_and_latency():
     assert 0.0 <= p50 <= p99 < 100.0, lines["top"]
     wrist = re.search(r"(\d+) dropped by the camera", lines["wrist"])
     assert wrist is not None and int(wrist.group(1)) >= 5, lines["wrist"]
+
+
+def test_rgb8_frames_are_decoded_for_an_image_raw_subscriber_without_raw(ros, tmp_path):
+    node = start(tmp_path, "top=fake:64x48@30")
+    try:
+        compressed, raw, _ = subscribe(ros, "top")
+        image = raw.wait_count(3, 20.0, node)[-1]
+        assert (image.width, image.height, image.encoding) == (64, 48, "rgb8")
+        pixels = np.frombuffer(bytes(image.data), dtype=np.uint8).reshape(48, 64, 3).astype(np.int64)
+        sequence = int(round(pixels[:, :, 2].mean() / 8))
+        assert np.abs(pixels - picture(64, 48, sequence)).mean() < 3.0
+        node.assert_alive()
+    finally:
+        assert node.stop() == 0, node.log_tail()

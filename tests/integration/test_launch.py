@@ -152,3 +152,21 @@ def test_ctrl_c_stops_a_launcher_started_in_the_background_of_a_script(tmp_path)
     assert launcher.returncode == 0, output
     assert "so101-launch: stopping" in output and "killed" not in output, output
     assert all(gone(pid) for pid in started_pids(output).values()), "a node outlived the launcher"
+
+
+def test_a_timed_session_on_the_sim_resets_the_scene_before_each_episode(tmp_path):
+    bags, logs = tmp_path / "bags", tmp_path / "logs"
+    argv = [str(LAUNCH), "--control", "none", "--record", "--bags", str(bags), "--lite", "--sim-args", "--cameras none"]
+    argv += ["--episodes", "2", "--episode-time", "2", "--reset-time", "0.5", "--log-dir", str(logs)]
+    done = subprocess.run(argv, stdin=subprocess.DEVNULL, capture_output=True, text=True, timeout=120)
+    assert done.returncode == 0, done.stdout + done.stderr
+    assert "the recording session is over" in done.stdout, done.stdout
+    episodes = sorted(p for p in bags.glob("episode_*") if (p / "metadata.yaml").is_file())
+    assert [p.name for p in episodes] == ["episode_000000", "episode_000001"]
+    for episode in episodes:
+        info = yaml.safe_load((episode / "metadata.yaml").read_text())["rosbag2_bagfile_information"]
+        assert abs(info["duration"]["nanoseconds"] * 1e-9 - 2.0) < 0.5, info["duration"]
+        topics = {t["topic_metadata"]["name"] for t in info["topics_with_message_count"]}
+        assert "/cube/pose" in topics and "/joint_states" in topics, topics
+    resets = (logs / "so101_sim_node.log").read_text().count("new episode")
+    assert resets == 2, f"{resets} resets of the sim for 2 episodes"

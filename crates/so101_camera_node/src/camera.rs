@@ -4,7 +4,11 @@
 
 use std::{
     collections::BTreeMap,
-    sync::{mpsc::Receiver, Arc, Mutex, MutexGuard, PoisonError},
+    sync::{
+        atomic::{AtomicBool, Ordering},
+        mpsc::Receiver,
+        Arc, Mutex, MutexGuard, PoisonError,
+    },
     thread,
     time::Duration,
 };
@@ -77,7 +81,10 @@ pub struct CameraTopics {
     frame_id: String,
     compressed: Publisher<CompressedImage>,
     info: Publisher<CameraInfo>,
-    raw: Option<Publisher<Image>>,
+    pub raw: Arc<Publisher<Image>>,
+    /// Whether frames are decoded and published on image_raw: --raw, or while image_raw has a
+    /// subscriber (the main thread looks).
+    pub raw_wanted: Arc<AtomicBool>,
 }
 
 impl CameraTopics {
@@ -88,11 +95,8 @@ impl CameraTopics {
             frame_id: topics::camera_optical_frame(name),
             compressed: node.publisher(&topic(topics::IMAGE_COMPRESSED), qos.clone())?,
             info: node.publisher(&topic(topics::CAMERA_INFO), qos.clone())?,
-            raw: if raw {
-                Some(node.publisher(&topic(topics::IMAGE_RAW), qos)?)
-            } else {
-                None
-            },
+            raw: Arc::new(node.publisher(&topic(topics::IMAGE_RAW), qos)?),
+            raw_wanted: Arc::new(AtomicBool::new(raw)),
         })
     }
 }
@@ -207,7 +211,8 @@ impl Camera {
     }
 
     fn publish(&self, frame: &Frame) {
-        let Some((jpeg, rgb)) = self.encodings(frame) else {
+        let raw = self.topics.raw_wanted.load(Ordering::Relaxed);
+        let Some((jpeg, rgb)) = self.encodings(frame, raw) else {
             self.status().broken_frames += 1;
             return;
         };
@@ -224,8 +229,10 @@ impl Camera {
             self.intrinsics.as_ref(),
         );
         let mut ok = self.topics.info.publish(info).is_ok();
-        if let (Some(publisher), Some(rgb)) = (&self.topics.raw, rgb) {
-            ok &= publisher
+        if let (true, Some(rgb)) = (raw, rgb) {
+            ok &= self
+                .topics
+                .raw
                 .publish(Image {
                     header: header.clone(),
                     height: frame.height,
@@ -258,17 +265,14 @@ impl Camera {
         }
     }
 
-    /// The frame's JPEG (as it came, for MJPEG) and its rgb8 where needed, or None for a frame
-    /// that is not a whole JPEG or does not decode.
-    fn encodings(&self, frame: &Frame) -> Option<(Vec<u8>, Option<Vec<u8>>)> {
+    /// The frame's JPEG (as it came, for MJPEG) and its rgb8 where `raw` (or needed anyway), or
+    /// None for a frame that is not a whole JPEG or does not decode.
+    fn encodings(&self, frame: &Frame, raw: bool) -> Option<(Vec<u8>, Option<Vec<u8>>)> {
         let encoded = match frame.format {
             PixelFormat::Mjpeg => {
                 let jpeg = whole_jpeg(&frame.data)?;
-                let rgb = self
-                    .topics
-                    .raw
-                    .as_ref()
-                    .map(|_| rgb_from_jpeg(jpeg, frame.width, frame.height))
+                let rgb = raw
+                    .then(|| rgb_from_jpeg(jpeg, frame.width, frame.height))
                     .transpose();
                 rgb.map(|rgb| (jpeg.to_vec(), rgb))
             }

@@ -8,7 +8,8 @@ use crate::{controls::ControlRequest, request::CameraRequest};
 
 /// Real cameras as ROS image topics: each `--camera NAME=DEVICE` publishes the camera's own JPEG
 /// frames unchanged on camera/NAME/image_raw/compressed (sensor_msgs/CompressedImage), its
-/// CameraInfo on camera/NAME/camera_info and, with --raw, rgb8 frames on camera/NAME/image_raw,
+/// CameraInfo on camera/NAME/camera_info and rgb8 frames on camera/NAME/image_raw while it has a
+/// subscriber (always with --raw),
 /// each stamped with the instant the frame was captured. DEVICE `fake:SETTINGS` is the
 /// in-process test camera (docs/real_arm.md).
 #[derive(Debug, clap::Parser)]
@@ -30,7 +31,8 @@ pub struct Args {
     /// Wait for a camera that is not plugged in yet instead of refusing to start.
     #[arg(long)]
     pub wait: bool,
-    /// Also publish rgb8 frames on camera/NAME/image_raw (decoded from the JPEG).
+    /// Decode every frame and publish it as rgb8 on camera/NAME/image_raw, subscribed or not
+    /// (without it: only while image_raw has a subscriber).
     #[arg(long)]
     pub raw: bool,
     /// JPEG quality of the frames of YUYV-only cameras, 1-100.

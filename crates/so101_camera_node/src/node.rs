@@ -7,6 +7,7 @@ use std::{
     fs,
     path::Path,
     sync::{
+        atomic::Ordering,
         mpsc::{channel, Sender},
         Arc, Mutex, PoisonError,
     },
@@ -183,6 +184,20 @@ pub fn run(args: Args) -> Result<()> {
         opened.push((mode, stream, calibration, camera_settings, controls));
     }
     let mut node = RosNode::start("so101_camera_node", &args.node)?;
+    // ros2-client's spinner keeps the counts of matched subscribers (image_raw is decoded only
+    // while it has one, or with --raw).
+    let spinner = node
+        .node_mut()
+        .spinner()
+        .map_err(|error| anyhow::anyhow!("cannot start the ROS spinner: {error:?}"))?;
+    thread::Builder::new()
+        .name("ros-spinner".into())
+        .spawn(move || {
+            if let Err(error) = smol::block_on(spinner.spin()) {
+                tracing::warn!(?error, "the ROS spinner stopped");
+            }
+        })
+        .context("cannot start the ROS spinner")?;
     let camera_controls: Vec<(&str, &[ControlState])> = args
         .cameras
         .iter()
@@ -194,6 +209,7 @@ pub fn run(args: Args) -> Result<()> {
     let mut workers = Vec::new();
     let mut statuses = Vec::new();
     let mut control_senders: BTreeMap<String, Sender<(ControlKind, Setting)>> = BTreeMap::new();
+    let mut raw_topics = Vec::new();
     for ((request, device), (mode, stream, calibration, camera_settings, _)) in
         args.cameras.iter().zip(devices).zip(opened)
     {
@@ -206,8 +222,10 @@ pub fn run(args: Args) -> Result<()> {
         }));
         let (sender, control_changes) = channel();
         control_senders.insert(request.name.clone(), sender);
+        let topics = CameraTopics::advertise(&mut node, &request.name, args.raw)?;
+        raw_topics.push((Arc::clone(&topics.raw), Arc::clone(&topics.raw_wanted)));
         let camera = Camera {
-            topics: CameraTopics::advertise(&mut node, &request.name, args.raw)?,
+            topics,
             request: request.clone(),
             device,
             jpeg_quality: args.jpeg_quality,
@@ -230,6 +248,10 @@ pub fn run(args: Args) -> Result<()> {
         thread::sleep(Duration::from_millis(50));
         for change in parameters.changes() {
             forward_control_change(&change.name, &change.value, &control_senders);
+        }
+        for (publisher, wanted) in &raw_topics {
+            let subscribed = publisher.get_subscription_count(node.node()) > 0;
+            wanted.store(args.raw || subscribed, Ordering::Relaxed);
         }
         let elapsed = last_report.elapsed();
         if elapsed < Duration::from_secs(1) {

@@ -1,8 +1,12 @@
 """Putting streams recorded at their own rates onto the dataset's frame grid. Pure functions.
 
 Alignment (also in docs/lerobot.md): every stream is a list of (time, value) in sim time. Frame k
-of an episode is at t_k = t_0 + k / fps, where t_0 is the first instant at which every stream has
-delivered a message. Each stream contributes its latest value at or before t_k (zero-order hold:
+of an episode is at t_k = t_0 + k / fps, where t_0 is half a frame after the first instant at which
+every stream has delivered a message. Half a frame: a stream at the dataset's rate (a camera at
+30 fps) then has its messages half a period away from every t_k. Starting at that instant itself
+would put them on the t_k, where a stamp's jitter (or float64's 0.2 us at epoch times) decides
+between two frames: rows would repeat one frame and skip the next. Each stream contributes its
+latest value at or before t_k (zero-order hold:
 what the policy would have seen, or the command in force, at that instant). The episode ends at
 the last t_k not later than the end of the shortest stream plus one of its periods, so no frame
 holds a value far beyond its stream's last message.
@@ -20,7 +24,7 @@ def frame_times(streams: dict[str, list[float]], fps: float, hold_limit: dict[st
     per stream, how long past its last message a value may be held (default: one frame)."""
     if not streams or any(len(times) == 0 for times in streams.values()):
         return np.zeros(0)
-    start = max(times[0] for times in streams.values())
+    start = max(times[0] for times in streams.values()) + 0.5 / fps
     limits = hold_limit or {}
     end = min(times[-1] + limits.get(name, 1.0 / fps) for name, times in streams.items())
     if end < start:
