@@ -2,7 +2,8 @@
 
 - lerobot-record with LeRobot's so101_leader teleoperator on an emulated leader arm (the servo
   emulator on a pty, calibrated; its shoulder is moved by hand during the recording): 2 episodes
-  that LeRobotDataset loads, actions that follow the leader, the sim following them, camera frames;
+  that LeRobotDataset loads, actions that follow the leader, the sim following them, camera frames
+  (read as JPEG, sensor_msgs/CompressedImage, as from a real camera);
 - lerobot-replay of episode 1: the sim ends where the episode's actions end;
 - async inference: policy_server + robot_client --robot.type=so101_ros with a tiny ACT trained here
   on that dataset; the client's actions arrive on /joint_commands.
@@ -34,6 +35,9 @@ BIN = Path(sys.executable).parent
 LEADER_CALIBRATION = REPO_ROOT / "assets" / "emulated_arm" / "so101_calibration.json"
 FPS, EPISODE_S = 15, 3
 CAMERA = "{top: {width: 64, height: 48, fps: 30}}"
+# lerobot-record reads the camera's JPEG frames (what a real camera's so101_camera_node publishes);
+# async inference below reads the raw ones.
+COMPRESSED_CAMERA = "{top: {width: 64, height: 48, fps: 30, compressed: true}}"
 PAN_STEP_TICKS = 400  # the leader's shoulder_pan is moved by this much during episode 0
 PAN_STEP_DEG = PAN_STEP_TICKS * 360 / 4095  # LeRobot's DEGREES: ticks from mid-range * 360 / 4095
 PAN = contract.JOINT_NAMES.index("shoulder_pan")
@@ -82,7 +86,7 @@ def recording(tmp_path_factory, ros_probe):
     calibration.parent.mkdir(parents=True)
     shutil.copy(LEADER_CALIBRATION, calibration)
     leader = ServoEmulator(root / "leader_bus", root / "leader.log", "--calibration", str(LEADER_CALIBRATION))
-    sim = SimNode(node_binary(), ["--lite", "--cameras", "top:64x48", "--camera-rate", "30"], root / "sim.log")
+    sim = SimNode(node_binary(), ["--lite", "--cameras", "top:64x48", "--camera-rate", "30", "--jpeg"], root / "sim.log")
     states = ros_probe.subscribe("/joint_states", JointState, best_effort_qos())
     commands = ros_probe.subscribe("/joint_commands", JointState, best_effort_qos())
     dataset = root / "dataset"
@@ -90,7 +94,7 @@ def recording(tmp_path_factory, ros_probe):
         str(BIN / "lerobot-record"),
         "--robot.type=so101_ros",
         "--robot.id=sim",
-        f"--robot.cameras={CAMERA}",
+        f"--robot.cameras={COMPRESSED_CAMERA}",
         "--teleop.type=so101_leader",
         f"--teleop.port={leader.link}",
         "--teleop.id=leader",
