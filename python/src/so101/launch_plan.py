@@ -89,14 +89,7 @@ def plan(args) -> list[NodeSpec]:
             arm = Path(calibration) if calibration else lerobot_calibration_file(args.robot_id)
             if not arm.is_file():
                 raise SystemExit(f"so101-launch: no calibration file {arm} for the emulated arm")
-            specs.append(
-                NodeSpec(
-                    "so101_servo_emulator",
-                    [str(node_binary("so101_servo_emulator")), "--link", port, "--calibration", str(arm)],
-                    ready=f"path {port}",
-                    open_stdin=True,
-                )
-            )
+            specs.append(emulator_spec("so101_servo_emulator", port, arm))
         if not port:
             raise SystemExit("so101-launch: --robot real needs --port (or --emulate)")
         driver = [str(node_binary("so101_feetech_driver")), "--port", port, *ns]
@@ -111,14 +104,7 @@ def plan(args) -> list[NodeSpec]:
             if not leader_port and args.emulate:
                 # An emulated leader arm beside the follower, configured as the same calibration.
                 leader_port = str(Path(args.log_dir) / "leader_bus")
-                specs.append(
-                    NodeSpec(
-                        "leader_emulator",
-                        [str(node_binary("so101_servo_emulator")), "--link", leader_port, "--calibration", str(arm)],
-                        ready=f"path {leader_port}",
-                        open_stdin=True,
-                    )
-                )
+                specs.append(emulator_spec("leader_emulator", leader_port, arm))
             if not leader_port:
                 raise SystemExit("so101-launch: a leader arm on the real robot needs --leader-port (or --emulate)")
             leader = [str(node_binary("so101_feetech_driver")), "--port", leader_port, "--leader", *ns]
@@ -186,6 +172,13 @@ def plan(args) -> list[NodeSpec]:
         runner += shlex.split(args.policy_args)
         specs.append(NodeSpec("so101-run-policy", runner, ends_run=True))
     return specs
+
+
+def emulator_spec(name: str, link: str, calibration: Path) -> NodeSpec:
+    """so101_servo_emulator standing in for an arm's bus at `link`, its servos configured as
+    `calibration` says; up once the link exists."""
+    argv = [str(node_binary("so101_servo_emulator")), "--link", link, "--calibration", str(calibration)]
+    return NodeSpec(name, argv, ready=f"path {link}", open_stdin=True)
 
 
 def camera_spec(args, ns: list[str]) -> NodeSpec:
