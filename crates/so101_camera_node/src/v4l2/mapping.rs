@@ -100,6 +100,19 @@ pub fn capture_instant(flags: Flags, timestamp: Timestamp, dequeued: Duration) -
     }
 }
 
+/// A frame's rows without the padding a driver may add after each (its stride, bytesperline,
+/// longer than `row_bytes`), as the YUYV conversion reads them: packed.
+pub fn packed_rows(data: &[u8], stride: usize, row_bytes: usize, height: usize) -> Vec<u8> {
+    if stride <= row_bytes {
+        return data.to_vec();
+    }
+    data.chunks(stride)
+        .take(height)
+        .flat_map(|row| &row[..row_bytes.min(row.len())])
+        .copied()
+        .collect()
+}
+
 #[cfg(test)]
 mod tests {
     use v4l::{
@@ -166,6 +179,14 @@ mod tests {
             step: Fraction::new(1, 1000),
         }));
         assert_eq!(rates_of(&[range]), [60.0, 30.0, 15.0, 5.0]);
+    }
+
+    #[test]
+    fn padded_rows_are_packed() {
+        // Two rows of 4 bytes, each padded to a stride of 6.
+        let padded = [1, 2, 3, 4, 0, 0, 5, 6, 7, 8, 0, 0];
+        assert_eq!(packed_rows(&padded, 6, 4, 2), [1, 2, 3, 4, 5, 6, 7, 8]);
+        assert_eq!(packed_rows(&[1, 2, 3, 4], 4, 4, 1), [1, 2, 3, 4]);
     }
 
     #[test]

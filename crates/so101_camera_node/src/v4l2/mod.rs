@@ -118,6 +118,7 @@ impl CameraDevice for V4l2Camera {
         Ok(Box::new(V4l2Stream {
             path: self.path.clone(),
             mode,
+            stride: format.stride as usize,
             stream: Some(stream),
             device,
         }))
@@ -127,6 +128,8 @@ impl CameraDevice for V4l2Camera {
 struct V4l2Stream {
     path: PathBuf,
     mode: Mode,
+    /// Bytes per row as the driver lays YUYV frames out (at least width * 2).
+    stride: usize,
     /// Dropped before the device (it stops streaming on drop).
     stream: Option<MmapStream<'static>>,
     device: Device,
@@ -153,8 +156,17 @@ impl CameraStream for V4l2Stream {
             )));
         }
         let used = (metadata.bytesused as usize).min(buffer.len());
+        let data = match self.mode.format {
+            PixelFormat::Mjpeg => buffer[..used].to_vec(),
+            PixelFormat::Yuyv => mapping::packed_rows(
+                &buffer[..used],
+                self.stride,
+                self.mode.width as usize * 2,
+                self.mode.height as usize,
+            ),
+        };
         Ok(Frame {
-            data: buffer[..used].to_vec(),
+            data,
             format: self.mode.format,
             width: self.mode.width,
             height: self.mode.height,
