@@ -1,5 +1,5 @@
 //! The node's message contents that are pure: CameraInfo of a calibrated or uncalibrated camera,
-//! and stamps.
+//! and capture instants as stamps.
 
 use std::time::{Duration, SystemTime, UNIX_EPOCH};
 
@@ -50,9 +50,7 @@ pub fn now_since_epoch() -> Duration {
         .unwrap_or_default()
 }
 
+/// A stamp of a time since the epoch (saturating, as `Time::from_nanos` does).
 pub fn stamp_of(since_epoch: Duration) -> Time {
-    Time {
-        sec: i32::try_from(since_epoch.as_secs()).unwrap_or(i32::MAX),
-        nanosec: since_epoch.subsec_nanos(),
-    }
+    Time::from_nanos(i64::try_from(since_epoch.as_nanos()).unwrap_or(i64::MAX))
 }

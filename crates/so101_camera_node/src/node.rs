@@ -25,7 +25,7 @@ use so101_core::{
         RosNode,
     },
 };
-use so101_msgs::{diagnostic_msgs::DiagnosticArray, std_msgs::Header};
+use so101_msgs::{builtin_interfaces::Time, diagnostic_msgs::DiagnosticArray, std_msgs::Header};
 
 use crate::{
     calibration::{self, Intrinsics},
@@ -34,7 +34,6 @@ use crate::{
     controls::{ControlKind, ControlState, Setting, AUTO},
     device::CameraDevice,
     fake::FakeCamera,
-    messages::{now_since_epoch, stamp_of},
     modes,
     request::{CameraRequest, DeviceName},
     status::{diagnostic, summary, CameraStatus},
@@ -271,7 +270,7 @@ pub fn run(args: Args) -> Result<()> {
             })
             .collect();
         let header = Header {
-            stamp: stamp_of(now_since_epoch()),
+            stamp: Time::now(),
             frame_id: String::new(),
         };
         if diagnostics
@@ -315,7 +314,6 @@ fn forward_control_change(
 /// changed while it runs.
 pub fn declarations(args: &Args, camera_controls: &[(&str, &[ControlState])]) -> Parameters {
     let options = Options::of::<Args>();
-    let joined = |items: Vec<String>| Value::StringArray(items);
     let cameras = args
         .cameras
         .iter()
@@ -327,8 +325,8 @@ pub fn declarations(args: &Args, camera_controls: &[(&str, &[ControlState])]) ->
         .map(|(name, file)| format!("{name}={}", file.display()))
         .collect();
     let mut declared = vec![
-        options.declare("camera", joined(cameras)),
-        options.declare("calibration", joined(calibrations)),
+        options.declare("camera", Value::StringArray(cameras)),
+        options.declare("calibration", Value::StringArray(calibrations)),
         options.declare("raw", Value::Bool(args.raw)),
         options.declare("jpeg_quality", Value::Integer(i64::from(args.jpeg_quality))),
     ];

@@ -21,10 +21,15 @@ impl CameraStatus {
     }
 }
 
-/// The `q` quantile (0..=1) of `values`, or None for none.
-pub fn quantile(values: &VecDeque<f64>, q: f64) -> Option<f64> {
-    let mut sorted: Vec<f64> = values.iter().copied().collect();
+/// `values` in ascending order, for [`quantile`].
+pub fn sorted(values: impl IntoIterator<Item = f64>) -> Vec<f64> {
+    let mut sorted: Vec<f64> = values.into_iter().collect();
     sorted.sort_by(f64::total_cmp);
+    sorted
+}
+
+/// The `q` quantile (0..=1, nearest rank) of ascending `sorted` values, or None for none.
+pub fn quantile(sorted: &[f64], q: f64) -> Option<f64> {
     let last = sorted.len().checked_sub(1)?;
     Some(sorted[((last as f64) * q).round() as usize])
 }
@@ -32,10 +37,8 @@ pub fn quantile(values: &VecDeque<f64>, q: f64) -> Option<f64> {
 /// One line on a camera's run, printed at exit: what a user checks a camera with.
 pub fn summary(status: &CameraStatus, elapsed: Duration) -> String {
     let seconds = elapsed.as_secs_f64().max(1e-9);
-    let latency = match (
-        quantile(&status.latencies_ms, 0.5),
-        quantile(&status.latencies_ms, 0.99),
-    ) {
+    let latencies = sorted(status.latencies_ms.iter().copied());
+    let latency = match (quantile(&latencies, 0.5), quantile(&latencies, 0.99)) {
         (Some(p50), Some(p99)) => format!("latency p50 {p50:.1} ms, p99 {p99:.1} ms"),
         _ => "no latency (no frame)".to_owned(),
     };

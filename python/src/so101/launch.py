@@ -181,7 +181,8 @@ class Launch:
                     return entry
             if session is not None and session.poll():
                 return None
-            time.sleep(0.05)
+            # A session's keys and episode ends want a quicker look than the nodes and the bags do.
+            time.sleep(0.05 if session is not None else 0.2)
         return None
 
 

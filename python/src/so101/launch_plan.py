@@ -135,7 +135,7 @@ def plan(args) -> list[NodeSpec]:
         # Only the bridge subscribes to the task's reward this early (the recorder starts after it).
         if args.camera:
             # The real cameras by their names (the default is the sim's).
-            sink_args += ["--cameras", ",".join(request.split("=", 1)[0] for request in args.camera)]
+            sink_args += ["--cameras", ",".join(camera_names(args))]
         specs.append(
             NodeSpec("so101_rerun", [str(node_binary("so101_rerun")), "live", *sink_args, *ns], ready="subscriber /task/reward")
         )
@@ -181,13 +181,18 @@ def emulator_spec(name: str, link: str, calibration: Path) -> NodeSpec:
     return NodeSpec(name, argv, ready=f"path {link}", open_stdin=True)
 
 
+def camera_names(args) -> list[str]:
+    """The NAME of each --camera NAME=DEVICE."""
+    return [request.split("=", 1)[0] for request in args.camera]
+
+
 def camera_spec(args, ns: list[str]) -> NodeSpec:
     """so101_camera_node serving each --camera, up once the first camera's JPEG topic is there."""
     camera = [str(node_binary("so101_camera_node")), *ns]
     for request in args.camera:
         camera += ["--camera", request]
     camera += shlex.split(args.camera_args)
-    first = args.camera[0].split("=", 1)[0]
+    first = camera_names(args)[0]
     return NodeSpec(
         "so101_camera_node",
         camera,

@@ -5,16 +5,17 @@
 
 use std::{
     process::ExitCode,
-    time::{Duration, Instant, SystemTime, UNIX_EPOCH},
+    time::{Duration, Instant},
 };
 
 use anyhow::Result;
 use clap::Parser;
+use so101_camera_node::status::{quantile, sorted};
 use so101_core::{
     contract::topics,
     ros::{logging, qos, NodeArgs, RosNode},
 };
-use so101_msgs::sensor_msgs::CompressedImage;
+use so101_msgs::{builtin_interfaces::Time, sensor_msgs::CompressedImage};
 
 /// Receives one camera's JPEG frames for --seconds and prints their count and capture-to-subscriber
 /// latency (p50, p99) as JSON.
@@ -50,27 +51,20 @@ fn run(args: Args) -> Result<()> {
     {
         match frames.take() {
             Ok(Some((message, _))) => {
-                let now = SystemTime::now().duration_since(UNIX_EPOCH)?.as_secs_f64();
-                let stamp = f64::from(message.header.stamp.sec)
-                    + f64::from(message.header.stamp.nanosec) * 1e-9;
+                let arrived = Time::now().as_secs_f64();
                 first.get_or_insert_with(Instant::now);
-                latencies_ms.push((now - stamp) * 1e3);
+                latencies_ms.push((arrived - message.header.stamp.as_secs_f64()) * 1e3);
             }
             _ => std::thread::sleep(Duration::from_micros(200)),
         }
     }
-    latencies_ms.sort_by(f64::total_cmp);
-    let quantile = |q: f64| {
-        latencies_ms
-            .len()
-            .checked_sub(1)
-            .map(|last| latencies_ms[((last as f64) * q).round() as usize])
-    };
+    let latencies_ms = sorted(latencies_ms);
+    let ms = |q: f64| quantile(&latencies_ms, q).map_or("null".into(), |v| format!("{v:.3}"));
     println!(
         "{{\"frames\": {}, \"p50_ms\": {}, \"p99_ms\": {}}}",
         latencies_ms.len(),
-        quantile(0.5).map_or("null".into(), |v| format!("{v:.3}")),
-        quantile(0.99).map_or("null".into(), |v| format!("{v:.3}")),
+        ms(0.5),
+        ms(0.99),
     );
     Ok(())
 }

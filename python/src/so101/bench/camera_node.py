@@ -36,6 +36,7 @@ from pathlib import Path
 
 from so101 import contract, process
 from so101.bench import common as bench_common
+from so101.bench.latency import percentile
 from so101.bench.recorder import cpu_seconds
 from so101.paths import asset
 
@@ -67,11 +68,6 @@ except (KeyboardInterrupt, ExternalShutdownException):
     pass
 print(json.dumps(latencies))
 """
-
-
-def quantile(values: list[float], q: float) -> float:
-    ordered = sorted(values)
-    return ordered[round((len(ordered) - 1) * q)]
 
 
 def start_node(bin_dir: Path, cameras: list[str], log: Path, extra: list[str] = ()) -> subprocess.Popen:
@@ -264,7 +260,8 @@ def main() -> int:
         jpegs = [path.read_bytes() for path in sorted(keep.glob("*.jpg"))]
         results["opencv_ms_per_frame"] = opencv_ms_per_frame(jpegs, rounds=10)
         results["jpeg_bytes"] = statistics.mean(len(jpeg) for jpeg in jpegs)
-        results["rclpy_latency_ms"] = {"frames": len(rclpy), "p50": quantile(rclpy, 0.5), "p99": quantile(rclpy, 0.99)}
+        ordered = sorted(rclpy)
+        results["rclpy_latency_ms"] = {"frames": len(rclpy), "p50": percentile(ordered, 50), "p99": percentile(ordered, 99)}
         print("[3/3] three cameras + driver + recorder ...", file=sys.stderr, flush=True)
         results["full_load"] = full_load(args.bin_dir, args.seconds, work)
     finally:
