@@ -20,7 +20,7 @@ from __future__ import annotations
 import os
 import select
 import sys
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from enum import Enum
 
 
@@ -85,7 +85,6 @@ class Session:
     recorded: int = 0  # episodes kept so far
     # Whether the episode closed last may still be dropped (during the reset period after it).
     last_droppable: bool = False
-    log: list[str] = field(default_factory=list)
 
     def begin(self, now: float) -> list[Action]:
         return self._start(now)
