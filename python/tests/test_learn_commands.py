@@ -63,3 +63,43 @@ def test_evaluation_goes_through_the_runner_on_unseen_seeds(tmp_path):
     assert "--videos=10" in command
     # Outside a network namespace (as here) the runner is put inside one.
     assert Path(command[0]).name == "isolated"
+
+
+def test_diffusion_scales_actions_into_its_samplers_clip_range_act_by_mean_and_std(tmp_path):
+    import json
+
+    for recipe, action in (("diffusion", "MIN_MAX"), ("act", "MEAN_STD")):
+        command = lerobot_train.train_command(parse(lerobot_train, recipe, "--dataset", str(tmp_path)), tmp_path / "out")
+        (mapping,) = [arg.split("=", 1)[1] for arg in command if arg.startswith("--policy.normalization_mapping=")]
+        assert json.loads(mapping)["ACTION"] == action, recipe
+
+
+def write_info(dataset: Path, features: dict) -> None:
+    import json
+
+    (dataset / "meta").mkdir(parents=True)
+    (dataset / "meta" / "info.json").write_text(json.dumps({"features": features}))
+
+
+def test_a_dataset_with_cameras_gets_a_backbone_from_scratch_and_colour_augmentation_only(tmp_path):
+    import json
+
+    state = {"observation.state": {"dtype": "float32", "shape": [6]}, "action": {"dtype": "float32", "shape": [6]}}
+    write_info(tmp_path / "state", state)
+    write_info(tmp_path / "cameras", {**state, "observation.images.top": {"dtype": "video", "shape": [72, 96, 3]}})
+    assert lerobot_train.dataset_cameras(tmp_path / "cameras") == ["observation.images.top"]
+
+    def command(dataset: str, recipe: str = "act") -> list[str]:
+        return lerobot_train.train_command(parse(lerobot_train, recipe, "--dataset", str(tmp_path / dataset)), tmp_path / "o")
+
+    assert not any("image_transforms" in arg or "backbone" in arg for arg in command("state"))
+    vision = command("cameras")
+    assert "--policy.pretrained_backbone_weights=null" in vision
+    assert "--dataset.image_transforms.enable=true" in vision
+    (tfs,) = [arg.split("=", 1)[1] for arg in vision if arg.startswith("--dataset.image_transforms.tfs=")]
+    transforms = json.loads(tfs)
+    # LeRobot's own colour transforms, its geometric one left out (it would move the cube).
+    assert {"brightness", "contrast", "saturation", "hue", "sharpness"} == set(transforms)
+    assert transforms["brightness"]["type"] == "ColorJitter"
+    diffusion = command("cameras", "diffusion")
+    assert "--dataset.image_transforms.enable=true" in diffusion and "--policy.pretrained_backbone_weights=null" in diffusion

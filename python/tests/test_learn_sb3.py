@@ -6,6 +6,7 @@ SAC's checkpoints, progress.csv, success.png, --resume and VecNormalize statisti
 
 from __future__ import annotations
 
+import argparse
 import json
 import subprocess
 import sys
@@ -175,6 +176,74 @@ def test_sac_checkpoints_resumes_from_the_newest_and_keeps_its_vecnormalize_stat
     assert not np.allclose(statistics(newest).mean, statistics(first[1]).mean)
     with pytest.raises(SystemExit, match="holds a run already"):
         cli.main(["sac", "--steps", "450", *common])
+
+
+def test_bc_continued_by_sac_starts_from_the_clone_with_the_demonstrations_in_its_replay_buffer(tmp_path, capsys):
+    from stable_baselines3 import SAC
+
+    output = tmp_path / "bc"
+    args = ["bc", "--demos", "2", "--epochs", "30", "--batch-size", "64", "--hidden", "64", "64", "--eval", "0"]
+    args += ["--continue-with-sac", "60", "--critic-warmup", "20", "--sac-eval-every", "60", "--sac-eval-episodes", "1"]
+    assert cli.main([*args, "--output", str(output), "--quiet"]) == 0
+    bc = json.loads((output / "so101_learn.json").read_text())
+    sac = json.loads((output / "sac" / "so101_learn.json").read_text())
+    assert sac["algorithm"] == "sac" and sac["started_from"] == "bc" and sac["env"]["dense_reward"]
+    # The same observation and standardization as the clone was trained on.
+    assert sac["env"]["observation_shift"] == bc["env"]["observation_shift"]
+    transitions = bc["demonstrations"]["transitions"]
+    assert sac["training"]["demonstration_transitions"] == transitions
+    assert sac["training"]["env_steps_per_s"] > 0 and sac["training"]["gradient_steps_per_s"] > 0
+    # Step 0 is the clone's own evaluation, before SAC took a step.
+    assert [row["timesteps"] for row in progress(output / "sac")] == [0, 60]
+    model = SAC.load(output / "sac" / "model.zip", device="cpu")
+    model.load_replay_buffer(sb3_sac.checkpoints(output / "sac")[-1] / "replay_buffer.pkl")
+    assert model.replay_buffer.size() == transitions + 60, "the demonstrations stay in the buffer"
+    assert "gradient steps/s" in capsys.readouterr().out
+    assert cli.main(["eval", str(output / "sac"), "--eval", "1", "--output", str(tmp_path / "eval"), "--quiet"]) == 0
+
+
+def test_sac_actor_updates_keep_pulling_towards_the_demonstrations(tmp_path):
+    import torch
+    from imitation.data.types import TransitionsWithRew
+
+    from so101.learn import bc_to_sac
+
+    settings = EnvSettings(task="cube_to_bin", dense_reward=True)
+    args = bc_to_sac.sac_arguments(
+        argparse.Namespace(
+            continue_with_sac=10,
+            sac_n_envs=1,
+            sac_eval_every=10,
+            sac_eval_episodes=1,
+            eval_seed=0,
+            seed=0,
+            quiet=True,
+            hidden=[32],
+        )
+    )
+    model = sb3_sac.new_model(args, sb3_sac.make_vec_env(settings, 1, 0))
+    rng = np.random.default_rng(0)
+    observations = rng.normal(size=(64, 19)).astype(np.float32)
+    actions = np.clip(0.5 * observations[:, :6], -0.9, 0.9)  # something an MLP can fit
+    transitions = TransitionsWithRew(
+        observations, actions, np.array([{}] * 64), observations, np.zeros(64, bool), np.zeros(64, np.float32)
+    )
+
+    def loss() -> float:
+        with torch.no_grad():
+            return float(bc_to_sac.cloning_loss(model.actor, torch.tensor(observations), torch.tensor(actions)))
+
+    def updates(count: int) -> None:
+        for _ in range(count):  # SAC's own sequence for an actor update whose critic term is zero
+            model.actor.optimizer.zero_grad()
+            model.actor.optimizer.step()
+
+    before = loss()
+    updates(10)
+    assert loss() == before, "SB3's own optimizer: no gradient, no change"
+    bc_to_sac.keep_cloning(model, transitions, weight=1.0, seed=0)
+    updates(300)
+    assert loss() < 0.5 * before
 
 
 def test_lerobot_policies_go_to_so101_run_policy_inside_a_network_namespace(tmp_path):

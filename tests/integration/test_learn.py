@@ -69,6 +69,9 @@ def test_a_recipe_trains_on_the_demos_and_evaluates_through_the_runner(demos, re
     # The shrunk network came through, over the recipe's preset.
     assert (config.get("dim_model") == 32) if recipe == "act" else (config["down_dims"] == [16, 32, 64])
 
+    if recipe == "diffusion":
+        assert_actions_within_the_samplers_clip_range(checkpoint, config, demos)
+
     info = json.loads((output / "eval" / "eval_info.json").read_text())
     aggregated = info["aggregated"]
     assert aggregated["episodes"] == 2 and aggregated["backend"] == "ros"
@@ -79,3 +82,80 @@ def test_a_recipe_trains_on_the_demos_and_evaluates_through_the_runner(demos, re
     assert videos == ["episode_000_seed1000.mp4"], videos
     assert f"Summary: {recipe} trained 3 steps" in done.stdout
     assert "success:" in done.stdout and "over 2 episodes" in done.stdout
+
+
+def assert_actions_within_the_samplers_clip_range(checkpoint: Path, config: dict, dataset: Path) -> None:
+    """Diffusion's sampler clips every denoised action chunk to +-clip_sample_range in normalised
+    units: LeRobot's own preprocessor, as saved with the policy, must put the demonstrations'
+    actions inside it, or the policy can never command them (why it succeeded 0 % of the time)."""
+    import torch
+    from lerobot.datasets.lerobot_dataset import LeRobotDataset
+
+    from so101.policy import StackPolicy
+
+    frames = LeRobotDataset("local/demos", root=dataset).hf_dataset
+    batch = {
+        key: torch.stack([frame[key] for frame in frames])
+        for key in ("action", "observation.state", "observation.environment_state")
+    }
+    normalised = StackPolicy(str(checkpoint), device="cpu").preprocessor(batch)["action"]
+    assert config["clip_sample"]
+    assert float(normalised.abs().max()) <= config["clip_sample_range"] + 1e-5, normalised.abs().max(dim=0)
+
+
+@pytest.fixture(scope="module")
+def camera_demos(tmp_path_factory) -> Path:
+    """Two expert episodes seen by two small cameras, without the cube's pose (as on a real arm)."""
+    output = tmp_path_factory.mktemp("camera_demos")
+    argv = ["demos", "--episodes", "2", "--seed", "3", "--lite", "--cameras", "top:32x24,wrist:32x24"]
+    done = learn(*argv, "--no-environment-state", "--output", str(output), timeout=240)
+    assert "Summary: 2 demonstration(s) recorded" in done.stdout, done.stdout
+    return output / "dataset"
+
+
+def test_the_camera_recipe_trains_from_scratch_with_colour_augmentation_and_evaluates_both_ways(camera_demos, tmp_path):
+    output = tmp_path / "act"
+    tiny = ["--policy.dim_model=32", "--policy.n_heads=2", "--policy.dim_feedforward=64", "--policy.n_encoder_layers=1"]
+    argv = ["act", "--dataset", str(camera_demos), "--steps", "3", "--batch-size", "4", "--output", str(output)]
+    argv += ["--eval", "1", "--eval-videos", "1", "--quiet"] + [f"--policy-arg={arg}" for arg in tiny]
+    done = learn(*argv, timeout=400)
+
+    checkpoint = output / "checkpoints" / "last" / "pretrained_model"
+    config = json.loads((checkpoint / "config.json").read_text())
+    inputs = config["input_features"]
+    assert {"observation.images.top", "observation.images.wrist", "observation.state"} == set(inputs), inputs
+    assert inputs["observation.images.top"]["shape"] == [3, 24, 32]
+    # The backbone learnt from scratch: nothing was (or could be) downloaded.
+    assert config["pretrained_backbone_weights"] is None
+    transforms = json.loads((checkpoint / "train_config.json").read_text())["dataset"]["image_transforms"]
+    assert transforms["enable"] and "affine" not in transforms["tfs"] and "brightness" in transforms["tfs"]
+
+    info = json.loads((output / "eval" / "eval_info.json").read_text())
+    assert info["aggregated"]["episodes"] == 1 and "success:" in done.stdout
+    import av
+
+    with av.open(info["per_episode"][0]["video"]) as container:
+        frame = next(container.decode(video=0)).to_ndarray(format="rgb24")
+    # The policy's two 32x24 cameras side by side, enlarged to a watchable height (x15: 360 rows).
+    assert frame.shape == (360, 960, 3), frame.shape
+
+    # The same policy through LeRobot's own evaluation, on the env type with the same cameras.
+    evaluation = tmp_path / "lerobot_eval"
+    command = [
+        str(VENV_BIN / "lerobot-eval"),
+        f"--policy.path={checkpoint}",
+        "--policy.device=cpu",
+        "--env.type=so101_sim",
+        "--env.cameras={top: [24, 32], wrist: [24, 32]}",
+        "--env.environment_state=false",
+        "--env.episode_length=8",
+        "--eval.n_episodes=1",
+        "--eval.batch_size=1",
+        "--eval.use_async_envs=false",
+        f"--output_dir={evaluation}",
+    ]
+    env = {**os.environ, "HF_HUB_OFFLINE": "1", "WANDB_MODE": "disabled"}
+    done = subprocess.run(command, capture_output=True, text=True, timeout=300, env=env)
+    assert done.returncode == 0, (done.stdout + done.stderr)[-4000:]
+    overall = json.loads((evaluation / "eval_info.json").read_text())["overall"]
+    assert overall["n_episodes"] == 1 and overall["pc_success"] == 0.0  # 8 steps cannot reach the bin

@@ -27,8 +27,20 @@ class EpisodeResult:
     video: str | None
 
 
+# A video frame is at least this tall: a policy's 72-pixel camera is a smudge on a screen.
+WATCHABLE_HEIGHT = 360
+
+
+def watchable(frame: np.ndarray, height: int = WATCHABLE_HEIGHT) -> np.ndarray:
+    """`frame` enlarged by the smallest whole factor that makes it at least `height` tall, each
+    pixel repeated (no interpolation: the video shows exactly what the policy saw)."""
+    factor = -(-height // frame.shape[0])
+    return frame if factor <= 1 else np.repeat(np.repeat(frame, factor, axis=0), factor, axis=1)
+
+
 def tile(frames: dict[str, np.ndarray]) -> np.ndarray:
-    """Frames side by side (each padded at the bottom to the tallest), for one video."""
+    """Frames side by side, each made watchable, then padded at the bottom to the tallest."""
+    frames = {name: watchable(frame) for name, frame in frames.items()}
     height = max(frame.shape[0] for frame in frames.values())
     return np.concatenate([np.pad(f, ((0, height - f.shape[0]), (0, 0), (0, 0))) for f in frames.values()], axis=1)
 

@@ -37,6 +37,17 @@ def add_parser(recipes, name: str) -> None:
         default="none",
         help=f'cameras to record, the sim\'s --cameras notation ("none", "top:128x96", "{",".join(contract.CAMERA_NAMES)}")',
     )
+    p.add_argument(
+        "--no-environment-state",
+        action="store_true",
+        help="leave the cube's pose out of the dataset (a camera policy must see the cube, as on a real arm)",
+    )
+    p.add_argument(
+        "--lite",
+        action="store_true",
+        help="the sim's lite scene (no meshes), far faster to render on a CPU; a camera policy trained on it is "
+        "evaluated on it too (so101-run-policy --lite, as the recipes do)",
+    )
     p.add_argument("--speed", type=float, default=None, help="sim speed (default 8 without cameras, else 4)")
     p.add_argument("--keep-failures", action="store_true", help="keep episodes the expert failed")
     p.add_argument("--repo-id", default=REPO_ID, help="the dataset's repo id")
@@ -60,7 +71,7 @@ def launch_command(args, output: Path) -> list[str]:
         f"--bags={output / 'bags'}",
         f"--log-dir={output / 'logs'}",
         f"--speed={speed:g}",
-        f"--sim-args=--cameras {shlex.quote(args.cameras)}",
+        f"--sim-args=--cameras {shlex.quote(args.cameras)}" + (" --lite" if args.lite else ""),
         f"--teleop-args={teleop}",
     ]
 
@@ -68,6 +79,8 @@ def launch_command(args, output: Path) -> list[str]:
 def convert_command(args, output: Path) -> list[str]:
     command = [sys.executable, "-m", "so101.convert", str(output / "bags"), "--output", str(output / "dataset")]
     command += ["--repo-id", args.repo_id]
+    if args.no_environment_state:
+        command.append("--no-environment-state")
     return command + ([] if args.keep_failures else ["--successful-only"])
 
 

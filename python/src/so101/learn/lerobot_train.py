@@ -32,10 +32,18 @@ from ..paths import repo_root
 from .eval_recipe import run_policy_command
 from .recipe import recipe_parser
 
+# ACT: every input and the actions by their mean and std (the cube's pose too: its z of ~0.77 m and a
+# quaternion would otherwise dwarf the joints).
 NORMALIZE_ALL = '{"VISUAL":"MEAN_STD","STATE":"MEAN_STD","ENV":"MEAN_STD","ACTION":"MEAN_STD"}'
+# Diffusion: actions (and joints) into [-1, 1] by their min and max, as LeRobot's own default. The
+# sampler clips every denoised chunk to [-1, 1] (clip_sample): under mean/std scaling 29-75 % of the
+# demonstrations' actions per joint lie outside it (the gripper's 75 %), so the arm could never
+# reach them.
+NORMALIZE_DIFFUSION = '{"VISUAL":"MEAN_STD","STATE":"MIN_MAX","ENV":"MEAN_STD","ACTION":"MIN_MAX"}'
 
 PRESETS: dict[str, dict] = {
     "act": {
+        "normalization": NORMALIZE_ALL,
         "policy": {
             "use_vae": "false",
             "dim_model": 256,
@@ -63,6 +71,7 @@ PRESETS: dict[str, dict] = {
         "batch_size": 64,
     },
     "diffusion": {
+        "normalization": NORMALIZE_DIFFUSION,
         "policy": {
             "down_dims": "[64,128,256]",
             "horizon": 16,
@@ -75,6 +84,40 @@ PRESETS: dict[str, dict] = {
         "batch_size": 64,
     },
 }
+
+
+# A dataset with cameras (observation.images.*), on top of the preset:
+# - the ResNet-18 backbone learns from scratch: ImageNet weights cannot be downloaded offline, and
+#   pictures of 96x72 pixels are far from ImageNet's anyway;
+# - LeRobot's image augmentation, colour only (brightness, contrast, saturation, hue, sharpness):
+#   its random affine shift moves the whole picture by up to 5 %, i.e. the cube by ~2 cm on the
+#   table as the top camera sees it, which a policy that must grasp within millimetres cannot
+#   tell from the cube really being elsewhere;
+# - more steps: the backbone has more to learn than the state's 13 numbers.
+GEOMETRIC_TRANSFORMS = ("affine",)
+
+
+def colour_transforms() -> str:
+    """LeRobot's default image transforms without the geometric ones, as lerobot-train's JSON."""
+    from dataclasses import asdict
+
+    from lerobot.transforms.transforms import ImageTransformsConfig
+
+    transforms = {name: asdict(config) for name, config in ImageTransformsConfig().tfs.items()}
+    return json.dumps({name: config for name, config in transforms.items() if name not in GEOMETRIC_TRANSFORMS})
+
+
+def vision_preset() -> tuple[dict, dict]:
+    """(policy, training) settings added to either preset for a dataset with cameras."""
+    policy = {"pretrained_backbone_weights": "null"}  # ACT's and Diffusion's default: ImageNet weights
+    training = {"dataset.image_transforms.enable": "true", "dataset.image_transforms.tfs": colour_transforms()}
+    return policy, training
+
+
+def dataset_cameras(dataset: Path) -> list[str]:
+    """The dataset's camera features (observation.images.<name>), from its meta/info.json."""
+    features = json.loads((dataset / "meta" / "info.json").read_text())["features"]
+    return [key for key, feature in features.items() if feature.get("dtype") in ("video", "image")]
 
 
 def add_parser(recipes, name: str) -> None:
@@ -122,11 +165,16 @@ def train_command(args, output: Path) -> list[str]:
         f"--policy.type={args.policy_type}",
         f"--policy.device={args.device}",
         "--policy.push_to_hub=false",
-        f"--policy.normalization_mapping={NORMALIZE_ALL}",
     ]
     preset = PRESETS[args.policy_type]
-    command += [f"--policy.{key}={value}" for key, value in preset["policy"].items()]
-    command += [f"--{key}={value}" for key, value in preset.get("training", {}).items()]
+    command.append(f"--policy.normalization_mapping={preset['normalization']}")
+    policy, training = dict(preset["policy"]), dict(preset.get("training", {}))
+    if (dataset / "meta" / "info.json").is_file() and dataset_cameras(dataset):
+        vision_policy, vision_training = vision_preset()
+        policy.update(vision_policy)
+        training.update(vision_training)
+    command += [f"--policy.{key}={value}" for key, value in policy.items()]
+    command += [f"--{key}={value}" for key, value in training.items()]
     command += [
         f"--steps={args.steps}",
         f"--batch_size={args.batch_size}",

@@ -28,6 +28,7 @@ import numpy as np
 from tqdm import tqdm
 
 from ..paths import repo_root
+from . import bc_to_sac
 from .recipe import recipe_parser
 from .wrappers import MAX_STEP, SETTINGS_FILE, EnvSettings, flatten, relative_action
 
@@ -57,6 +58,7 @@ def add_parser(subparsers, name: str) -> None:
     ev = p.add_argument_group("evaluation")
     ev.add_argument("--eval", type=int, default=50, metavar="M", help="seeded evaluation episodes (0: none)")
     ev.add_argument("--eval-seed", type=int, default=1000, help="seed of the first evaluation episode")
+    bc_to_sac.add_arguments(p)
     p.add_argument(
         "--torch-threads", type=int, default=1, help="torch's CPU threads (small MLPs: 1 is as fast, more stall on busy cores)"
     )
@@ -67,16 +69,17 @@ def add_parser(subparsers, name: str) -> None:
 def collect_demonstrations(
     settings: EnvSettings, episodes: int, waypoint_noise: float, action_noise: float, seed: int, quiet: bool = False
 ):
-    """The expert's successful episodes as imitation Transitions in the wrappers' spaces, and the
-    number of episodes dropped because the expert failed them. Sets `settings`' observation
-    standardization to the demonstrations' mean and standard deviation."""
-    from imitation.data.types import Transitions
+    """The expert's successful episodes as imitation TransitionsWithRew in the wrappers' spaces
+    (rewards of `settings`' reward mode; dones: the episode terminated there), and the number of
+    episodes dropped because the expert failed them. Sets `settings`' observation standardization
+    to the demonstrations' mean and standard deviation."""
+    from imitation.data.types import TransitionsWithRew
 
     from ..expert import ExpertPolicy
 
     env = settings.make(flat=False)
     expert = ExpertPolicy(waypoint_noise=waypoint_noise, action_noise=action_noise, seed=seed)
-    kept: list[tuple[list, list, list]] = []
+    kept: list[tuple[list, list, list, list, list]] = []
     dropped = 0
     for index in tqdm(range(episodes), desc="demonstrations", unit="ep", disable=quiet):
         observation, _ = env.reset(seed=seed + index)
@@ -85,34 +88,36 @@ def collect_demonstrations(
         except ValueError:  # no grasp reaches this cube
             dropped += 1
             continue
-        observations, actions, next_observations = [], [], []
+        observations, actions, next_observations, rewards, terminals = [], [], [], [], []
         success = False
         for _ in range(settings.episode_steps):
             action = relative_action(expert(observation), observation["agent_pos"], np.asarray(settings.max_step))
             observations.append(flatten(observation, settings.keys))
             actions.append(action)
-            observation, _, terminated, _, info = env.step(action)
+            observation, reward, terminated, _, info = env.step(action)
             next_observations.append(flatten(observation, settings.keys))
+            rewards.append(reward)
+            terminals.append(terminated)
             success = success or bool(info["is_success"])
             if terminated:
                 break
         if success:
-            kept.append((observations, actions, next_observations))
+            kept.append((observations, actions, next_observations, rewards, terminals))
         else:
             dropped += 1
     env.close()
     if not kept:
         raise SystemExit("so101-learn bc: the expert succeeded in none of the episodes")
-    observations = np.concatenate([np.array(obs) for obs, _, _ in kept])
-    next_observations = np.concatenate([np.array(nxt) for _, _, nxt in kept])
+    observations, actions, next_observations, rewards, terminals = (np.concatenate(part) for part in zip(*kept))
     shift, scale = observations.mean(axis=0), np.maximum(observations.std(axis=0), MIN_SCALE)
     settings.observation_shift, settings.observation_scale = shift.tolist(), scale.tolist()
-    transitions = Transitions(
+    transitions = TransitionsWithRew(
         obs=((observations - shift) / scale).astype(np.float32),
-        acts=np.concatenate([np.array(acts) for _, acts, _ in kept]),
+        acts=actions.astype(np.float32),
         infos=np.array([{}] * len(observations)),
         next_obs=((next_observations - shift) / scale).astype(np.float32),
-        dones=np.concatenate([np.arange(len(obs)) == len(obs) - 1 for obs, _, _ in kept]),
+        dones=terminals.astype(bool),
+        rews=rewards.astype(np.float32),
     )
     return transitions, len(kept), dropped
 
@@ -175,7 +180,10 @@ def run(args) -> int:
     torch.set_num_threads(args.torch_threads)
     output = Path(args.output or repo_root() / "outputs" / f"bc-{time.strftime('%Y%m%d-%H%M%S')}")
     output.mkdir(parents=True, exist_ok=True)
-    settings = EnvSettings(task="cube_to_bin", max_step=args.max_step, elapsed_time=not args.no_time_cue)
+    # The dense reward when SAC follows: the demonstrations' rewards go into its replay buffer.
+    settings = EnvSettings(
+        task="cube_to_bin", max_step=args.max_step, elapsed_time=not args.no_time_cue, dense_reward=args.continue_with_sac > 0
+    )
     begun = time.monotonic()
     transitions, kept, dropped = collect_demonstrations(
         settings, args.demos, args.waypoint_noise, args.action_noise, args.seed, quiet=args.quiet
@@ -221,6 +229,8 @@ def run(args) -> int:
     if args.eval > 0:
         summary = evaluate_saved(output, episodes=args.eval, seed=args.eval_seed, output=output / "eval", quiet=args.quiet)
     print_summary(output, kept, dropped, len(transitions), train_time, summary)
+    if args.continue_with_sac > 0:
+        return bc_to_sac.continue_with_sac(args, settings, transitions, output)
     return 0
 
 

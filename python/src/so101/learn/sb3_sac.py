@@ -263,18 +263,7 @@ def run(args) -> int:
         if args.vec_normalize:
             # Observations only: the dense rewards are already of order one.
             venv = VecNormalize(venv, norm_obs=True, norm_reward=False)
-        model = SAC(
-            "MlpPolicy",
-            venv,
-            learning_rate=args.lr,
-            buffer_size=args.buffer_size or min(max(args.steps, 100_000), 1_000_000),
-            learning_starts=args.learning_starts,
-            batch_size=args.batch_size,
-            gamma=args.gamma,
-            policy_kwargs={"net_arch": list(args.hidden)},
-            seed=args.seed,
-            device="cpu",
-        )
+        model = new_model(args, venv)
         record = {
             "algorithm": "sac",
             "model": MODEL_FILE,
@@ -289,6 +278,34 @@ def run(args) -> int:
         rows = []
         earlier = 0.0
 
+    return train_and_report(args, model, settings, venv, output, record, rows, earlier)
+
+
+def new_model(args, venv, learning_starts: int | None = None, buffer_size: int | None = None, ent_coef="auto"):
+    """A fresh SAC with the recipe's settings (args: the sac recipe's SAC options, steps, seed);
+    the keywords override the recipe's where given."""
+    from stable_baselines3 import SAC
+
+    return SAC(
+        "MlpPolicy",
+        venv,
+        learning_rate=args.lr,
+        buffer_size=buffer_size or args.buffer_size or min(max(args.steps, 100_000), 1_000_000),
+        learning_starts=args.learning_starts if learning_starts is None else learning_starts,
+        ent_coef=ent_coef,
+        batch_size=args.batch_size,
+        gamma=args.gamma,
+        policy_kwargs={"net_arch": list(args.hidden)},
+        seed=args.seed,
+        device="cpu",
+    )
+
+
+def train_and_report(
+    args, model, settings: EnvSettings, venv, output: Path, record: dict, rows: list[dict], earlier: float
+) -> int:
+    """SAC's online training up to args.steps with evaluations and checkpoints, then the last
+    checkpoint, progress.csv, success.png and a summary."""
     start_steps = model.num_timesteps
     # Wall times in progress.csv and the checkpoints count the training of every run of this output.
     started = time.monotonic()

@@ -6,7 +6,8 @@ Observation: {"agent_pos": float32[6] joint positions in LeRobot units (degrees,
 "environment_state": float32[7] cube position (m) and orientation (w x y z), world frame (when
 asked), "pixels": {camera: uint8[H, W, 3]} (when cameras are asked)}. Action: float32[6] joint
 targets in LeRobot units. info["is_success"]: the sim's /task/success of the step. render(): the
-render camera's frame of the last step (rgb_array), at metadata["render_fps"] = fps.
+render camera's frame of the last step (rgb_array), enlarged to at least 360 pixels tall (what
+lerobot-eval films), at metadata["render_fps"] = fps.
 """
 
 from __future__ import annotations
@@ -17,6 +18,7 @@ from gymnasium import spaces
 
 from .. import contract
 from ..envs import make_env
+from ..eval_episodes import watchable
 from ..units import JOINT_LIMITS, lerobot_from_radians, radians_from_lerobot
 
 
@@ -90,7 +92,7 @@ class So101LeRobotEnv(gym.Env):
         return self._convert(sim_observation), reward, terminated, truncated, {**info, "is_success": bool(info["is_success"])}
 
     def render(self) -> np.ndarray:
-        return self._frame
+        return watchable(self._frame)
 
     def close(self) -> None:
         self._sim.close()
