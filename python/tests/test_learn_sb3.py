@@ -184,6 +184,7 @@ def test_bc_continued_by_sac_starts_from_the_clone_with_the_demonstrations_in_it
     output = tmp_path / "bc"
     args = ["bc", "--demos", "2", "--epochs", "30", "--batch-size", "64", "--hidden", "64", "64", "--eval", "0"]
     args += ["--continue-with-sac", "60", "--critic-warmup", "20", "--sac-eval-every", "60", "--sac-eval-episodes", "1"]
+    args += ["--sac-n-envs", "2"]
     assert cli.main([*args, "--output", str(output), "--quiet"]) == 0
     bc = json.loads((output / "so101_learn.json").read_text())
     sac = json.loads((output / "sac" / "so101_learn.json").read_text())
@@ -191,13 +192,14 @@ def test_bc_continued_by_sac_starts_from_the_clone_with_the_demonstrations_in_it
     # The same observation and standardization as the clone was trained on.
     assert sac["env"]["observation_shift"] == bc["env"]["observation_shift"]
     transitions = bc["demonstrations"]["transitions"]
-    assert sac["training"]["demonstration_transitions"] == transitions
+    buffered = transitions - transitions % 2  # two worlds: the buffer takes transitions in pairs
+    assert sac["training"]["demonstration_transitions"] == buffered and sac["training"]["n_envs"] == 2
     assert sac["training"]["env_steps_per_s"] > 0 and sac["training"]["gradient_steps_per_s"] > 0
     # Step 0 is the clone's own evaluation, before SAC took a step.
     assert [row["timesteps"] for row in progress(output / "sac")] == [0, 60]
     model = SAC.load(output / "sac" / "model.zip", device="cpu")
     model.load_replay_buffer(sb3_sac.checkpoints(output / "sac")[-1] / "replay_buffer.pkl")
-    assert model.replay_buffer.size() == transitions + 60, "the demonstrations stay in the buffer"
+    assert model.replay_buffer.size() * 2 == buffered + 60, "the demonstrations stay in the buffer"
     assert "gradient steps/s" in capsys.readouterr().out
     assert cli.main(["eval", str(output / "sac"), "--eval", "1", "--output", str(tmp_path / "eval"), "--quiet"]) == 0
 

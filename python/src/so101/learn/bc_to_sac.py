@@ -137,18 +137,22 @@ def keep_cloning(model, transitions, weight: float, seed: int) -> None:
     actor.optimizer = optimizer
 
 
-def fill_replay_buffer(model, transitions) -> None:
-    """The demonstrations as the first transitions of SAC's replay buffer (one env's layout)."""
-    buffer = model.replay_buffer
-    for index in range(len(transitions.obs)):
+def fill_replay_buffer(model, transitions) -> int:
+    """The demonstrations as the first transitions of SAC's replay buffer, n_envs at a time as the
+    buffer stores them (the last len % n_envs are left out); returns how many went in."""
+    buffer, worlds = model.replay_buffer, model.n_envs
+    count = len(transitions.obs) - len(transitions.obs) % worlds
+    for start in range(0, count, worlds):
+        rows = slice(start, start + worlds)
         buffer.add(
-            transitions.obs[index : index + 1],
-            transitions.next_obs[index : index + 1],
-            transitions.acts[index : index + 1],
-            transitions.rews[index : index + 1],
-            transitions.dones[index : index + 1],
-            [{}],
+            transitions.obs[rows],
+            transitions.next_obs[rows],
+            transitions.acts[rows],
+            transitions.rews[rows],
+            transitions.dones[rows],
+            [{}] * worlds,
         )
+    return count
 
 
 def warm_up_critic(model, gradient_steps: int) -> None:
@@ -208,12 +212,12 @@ def continue_with_sac(args, settings: EnvSettings, transitions, bc_output: Path)
     )
     begun = time.monotonic()
     clone_loss = clone_actor(model, transitions, args.epochs, args.seed)
-    fill_replay_buffer(model, transitions)
+    buffered = fill_replay_buffer(model, transitions)
     warm_up_critic(model, args.critic_warmup)
     keep_cloning(model, transitions, BC_WEIGHT, args.seed)
     prepared_s = time.monotonic() - begun
     print(
-        f"sac: actor cloned (loss {clone_loss:.3f}), {len(transitions.obs)} demonstration transitions in the replay buffer, critics warmed up {args.critic_warmup} steps: {prepared_s:.0f} s"
+        f"sac: actor cloned (loss {clone_loss:.3f}), {buffered} demonstration transitions in the replay buffer, critics warmed up {args.critic_warmup} steps: {prepared_s:.0f} s"
     )
     speed = throughput(model, venv)
     print(f"sac: {speed['env_steps_per_s']:.0f} env steps/s, {speed['gradient_steps_per_s']:.0f} gradient steps/s (each alone)")
@@ -231,7 +235,7 @@ def continue_with_sac(args, settings: EnvSettings, transitions, bc_output: Path)
         "started_from": "bc",
         "training": {
             **{key: getattr(sac_args, key) for key in ("steps", "n_envs", "hidden", "lr", "batch_size", "gamma", "seed")},
-            "demonstration_transitions": len(transitions.obs),
+            "demonstration_transitions": buffered,
             "clone_epochs": args.epochs,
             "clone_loss": clone_loss,
             "critic_warmup": args.critic_warmup,

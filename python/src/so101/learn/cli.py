@@ -2,10 +2,12 @@
 
   demos      record N expert demonstrations through the stack (sim, scripted expert, recorder)
              and convert the bags into a LeRobot dataset
-  act        train LeRobot's ACT on the state (joints + cube pose) with lerobot-train, CPU-sized,
+  act        train LeRobot's ACT with lerobot-train, CPU-sized, on the state (joints + cube pose)
+             or on joints + cameras (a dataset of demos --cameras ... --no-environment-state),
              then evaluate it through so101-run-policy in lockstep
   diffusion  the same with LeRobot's Diffusion Policy
-  bc         behaviour cloning with `imitation` on in-process expert rollouts
+  bc         behaviour cloning with `imitation` on in-process expert rollouts;
+             --continue-with-sac STEPS: then SAC on cube_to_bin continuing from the clone
   sac        SAC (Stable-Baselines3) on the dense reward, success rate over training
   eval       evaluate any of them over M seeded episodes (95 % interval, rewards, MP4s)
 
