@@ -79,7 +79,8 @@ def sac_arguments(args) -> argparse.Namespace:
 
 
 def clone_actor(model, transitions, epochs: int, seed: int) -> float:
-    """Trains SAC's actor by maximum likelihood on the demonstrations; returns the last epoch's loss."""
+    """Trains SAC's actor on the demonstrations (step 1 of the module's docstring); returns the last
+    epoch's mean loss."""
     import torch
 
     generator = torch.Generator().manual_seed(seed)
@@ -97,8 +98,7 @@ def clone_actor(model, transitions, epochs: int, seed: int) -> float:
             index = order[start : start + CLONE_BATCH]
             mean, log_std, _ = actor.get_action_dist_params(observations[index])
             distribution = actor.action_dist.proba_distribution(mean, log_std)
-            squared_error = cloning_loss(actor, observations[index], actions[index])
-            loss = squared_error - NLL_WEIGHT * distribution.log_prob(clipped[index]).mean()
+            loss = squared_error(mean, actions[index]) - NLL_WEIGHT * distribution.log_prob(clipped[index]).mean()
             optimizer.zero_grad()
             loss.backward()
             optimizer.step()
@@ -108,12 +108,17 @@ def clone_actor(model, transitions, epochs: int, seed: int) -> float:
     return loss_sum
 
 
-def cloning_loss(actor, observations, actions):
-    """Squared error of the actor's deterministic actions against the demonstrations'."""
+def squared_error(mean, actions):
+    """Squared error of the deterministic actions tanh(mean) against the demonstrations'."""
     import torch
 
-    mean, _, _ = actor.get_action_dist_params(observations)
     return ((torch.tanh(mean) - actions) ** 2).sum(dim=1).mean()
+
+
+def cloning_loss(actor, observations, actions):
+    """The actor's squared error (squared_error) on these demonstrations."""
+    mean, _, _ = actor.get_action_dist_params(observations)
+    return squared_error(mean, actions)
 
 
 def keep_cloning(model, transitions, weight: float, seed: int) -> None:

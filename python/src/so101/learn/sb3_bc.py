@@ -11,6 +11,8 @@ policy) on demonstrations of the scripted expert, all in-process, then an evalua
    so101_learn.json (task, wrappers' parameters, training settings), bc_log/ (imitation's log).
 4. evaluation: --eval seeded episodes from --eval-seed (other seeds than the demonstrations'),
    deterministic actions, eval/eval_info.json; success rate with its 95 % interval.
+5. --continue-with-sac STEPS: then SAC on the dense reward continuing from the clone, the
+   demonstrations in its replay buffer (so101.learn.bc_to_sac; output in <output>/sac/).
 
 Measured: docs/benchmarks.md, "Learning".
 
