@@ -93,7 +93,14 @@ def test_a_dataset_with_cameras_gets_a_backbone_from_scratch_and_colour_augmenta
         return lerobot_train.train_command(parse(lerobot_train, recipe, "--dataset", str(tmp_path / dataset)), tmp_path / "o")
 
     assert not any("image_transforms" in arg or "backbone" in arg for arg in command("state"))
+    assert "--steps=1500" in command("state") and "--batch_size=64" in command("state")
     vision = command("cameras")
+    # A camera policy's own length: the annealing that brought the grasp ends at 4,000 steps.
+    assert "--steps=4000" in vision and "--batch_size=32" in vision
+    chosen = lerobot_train.train_command(
+        parse(lerobot_train, "act", "--dataset", str(tmp_path / "cameras"), "--steps", "7"), tmp_path / "o"
+    )
+    assert "--steps=7" in chosen and "--batch_size=32" in chosen
     assert "--policy.pretrained_backbone_weights=null" in vision
     assert "--dataset.image_transforms.enable=true" in vision
     (tfs,) = [arg.split("=", 1)[1] for arg in vision if arg.startswith("--dataset.image_transforms.tfs=")]

@@ -6,6 +6,11 @@ Without cameras (the default: state-based policies need none) the sim runs 8x re
 50 episodes take about a minute to record and one to convert on 2 cores. The expert's noise
 (teleop_node --waypoint-noise / --action-noise) makes the demonstrations cover more than one
 path per cube placement; failed expert episodes stay out of the dataset unless --keep-failures.
+
+For a camera policy: --cameras top:96x72,front:96x72,wrist:96x72 --lite --no-environment-state
+(small cameras of the scene without meshes, rendered at the size the policy sees, and no cube pose:
+the policy must find the cube in the pictures). 100 such episodes took 3.6 min to record and 3.4
+to convert.
 """
 
 from __future__ import annotations
