@@ -159,3 +159,21 @@ def test_the_camera_recipe_trains_from_scratch_with_colour_augmentation_and_eval
     assert done.returncode == 0, (done.stdout + done.stderr)[-4000:]
     overall = json.loads((evaluation / "eval_info.json").read_text())["overall"]
     assert overall["n_episodes"] == 1 and overall["pc_success"] == 0.0  # 8 steps cannot reach the bin
+
+
+def test_the_gpu_recipe_at_the_main_jobs_640x480_takes_a_few_steps_on_the_cpu(camera_demos, tmp_path):
+    """The recipe docs/learning.md gives for a GPU, on images of the main job's size: the camera
+    demos' bags converted at 640x480 (enlarged: the shape is what counts here, not the content),
+    then the same `so101-learn act` for two steps on the CPU."""
+    dataset = tmp_path / "dataset640"
+    command = [str(VENV_BIN / "so101-bag-to-lerobot"), str(camera_demos.parent / "bags"), "--output", str(dataset)]
+    command += ["--image-size", "640x480", "--no-environment-state", "--quiet"]
+    done = subprocess.run(command, capture_output=True, text=True, timeout=300)
+    assert done.returncode == 0, (done.stdout + done.stderr)[-3000:]
+    output = tmp_path / "act640"
+    learn(
+        "act", "--dataset", str(dataset), "--steps", "2", "--batch-size", "2", "--eval", "0", "--output", str(output), timeout=400
+    )
+    config = json.loads((output / "checkpoints" / "last" / "pretrained_model" / "config.json").read_text())
+    assert config["input_features"]["observation.images.top"]["shape"] == [3, 480, 640]
+    assert config["pretrained_backbone_weights"] is None

@@ -94,8 +94,8 @@ PRESETS: dict[str, dict] = {
 # - the ResNet-18 backbone learns from scratch: ImageNet weights cannot be downloaded offline, and
 #   pictures of 96x72 pixels are far from ImageNet's anyway;
 # - LeRobot's image augmentation, colour only (brightness, contrast, saturation, hue, sharpness):
-#   its random affine shift moves the whole picture by up to 5 %, i.e. the cube by ~2 cm on the
-#   table as the top camera sees it, which a policy that must grasp within millimetres cannot
+#   its random affine shift moves the whole picture by up to 5 %, i.e. the cube by centimetres on
+#   the table as the top camera sees it, which a policy that must grasp within millimetres cannot
 #   tell from the cube really being elsewhere;
 GEOMETRIC_TRANSFORMS = ("affine",)
 
