@@ -20,7 +20,7 @@ to improve it. The parts, in order, and why each:
 4. SAC online from there, the cloning loss on a batch of demonstrations added to every actor
    update (BC_WEIGHT times it, as TD3+BC does): without it the first 2,500 steps took the clone
    from 20 of 20 episodes to 0 of 20, the critic's values of actions the demonstrations never
-   took being guesses that the actor climbs; the entropy coefficient starts starting at ENT_COEF_START (SB3's 1.0
+   took being guesses that the actor climbs; the entropy coefficient starts at ENT_COEF_START (SB3's 1.0
    rewards randomness so much that the first updates widen the cloned policy into a random one),
    still tuned automatically by SB3.
 

@@ -126,11 +126,15 @@ VISION_LENGTH = {"act": {"steps": 4000, "batch_size": 32}}
 def resolve_length(args) -> None:
     """Fills --steps and --batch-size left out: the preset's, or its camera length for a dataset
     with cameras."""
-    dataset = Path(args.dataset)
-    cameras = (dataset / "meta" / "info.json").is_file() and bool(dataset_cameras(dataset))
-    length = {**PRESETS[args.policy_type], **(VISION_LENGTH.get(args.policy_type, {}) if cameras else {})}
+    vision = VISION_LENGTH.get(args.policy_type, {}) if has_cameras(Path(args.dataset)) else {}
+    length = {**PRESETS[args.policy_type], **vision}
     args.steps = length["steps"] if args.steps is None else args.steps
     args.batch_size = length["batch_size"] if args.batch_size is None else args.batch_size
+
+
+def has_cameras(dataset: Path) -> bool:
+    """Whether `dataset` is a LeRobot dataset with camera features (False when it is none yet)."""
+    return (dataset / "meta" / "info.json").is_file() and bool(dataset_cameras(dataset))
 
 
 def dataset_cameras(dataset: Path) -> list[str]:
@@ -192,7 +196,7 @@ def train_command(args, output: Path) -> list[str]:
     preset = PRESETS[args.policy_type]
     command.append(f"--policy.normalization_mapping={preset['normalization']}")
     policy, training = dict(preset["policy"]), dict(preset.get("training", {}))
-    if (dataset / "meta" / "info.json").is_file() and dataset_cameras(dataset):
+    if has_cameras(dataset):
         vision_policy, vision_training = vision_preset()
         policy.update(vision_policy)
         training.update(vision_training)
