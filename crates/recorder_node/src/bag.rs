@@ -158,6 +158,9 @@ pub struct BagWriter {
     /// The episode closed last (its index and directory), until the next one starts: what
     /// `discard_last` deletes.
     last_closed: Option<(u64, PathBuf)>,
+    /// The simulation's latest /sim/episode (JSON): what the open episode, and the next one, were
+    /// simulated with.
+    simulation: Option<String>,
 }
 
 /// Messages between two looks at the file size (split by size).
@@ -176,7 +179,17 @@ impl BagWriter {
             next_index,
             episode: None,
             last_closed: None,
+            simulation: None,
         })
+    }
+
+    /// The simulation's settings changed (a reset drew a new episode): the open episode, and the
+    /// next ones until another change, carry these.
+    pub fn set_simulation(&mut self, settings: String) {
+        if let Some(episode) = self.episode.as_mut() {
+            episode.info.simulation = Some(settings.clone());
+        }
+        self.simulation = Some(settings);
     }
 
     pub fn add_topic(&mut self, topic: TopicInfo) {
@@ -229,6 +242,7 @@ impl BagWriter {
                 stop_ns: None,
                 dropped: 0,
                 error: None,
+                simulation: self.simulation.clone(),
             },
             dir: dir.clone(),
             name,

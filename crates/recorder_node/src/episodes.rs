@@ -82,6 +82,9 @@ pub struct EpisodeInfo {
     pub dropped: u64,
     /// Why the recording failed, if it did (a full disk).
     pub error: Option<String>,
+    /// The simulation's /sim/episode settings (JSON: servo model, randomization and its draw);
+    /// none on the real arm.
+    pub simulation: Option<String>,
 }
 
 impl EpisodeInfo {
@@ -107,6 +110,10 @@ impl EpisodeInfo {
             ),
             ("dropped_messages".into(), self.dropped.to_string()),
             ("error".into(), self.error.clone().unwrap_or_default()),
+            (
+                custom_data::SIMULATION.into(),
+                self.simulation.clone().unwrap_or_default(),
+            ),
         ]
     }
 }
@@ -148,6 +155,7 @@ mod tests {
             index: 4,
             task: "t".into(),
             seed: None,
+            simulation: None,
             success: None,
             start_ns: 10,
             stop_ns: Some(20),

@@ -63,6 +63,8 @@ enum Command {
     Discard(Option<Reply>),
     DiscardLast(Option<Reply>),
     Dropped(u64),
+    /// A /sim/episode message: the simulation's settings for the episode.
+    Simulation(String),
     Shutdown(Option<bool>),
 }
 
@@ -211,6 +213,7 @@ fn spawn_writer(
                         .map(|index| format!("closed episode {index} discarded")),
                 ),
                 Ok(Command::Dropped(count)) => bag.add_dropped(count),
+                Ok(Command::Simulation(settings)) => bag.set_simulation(settings),
                 Ok(Command::Shutdown(hint)) => {
                     if bag.is_recording() {
                         if let Err(error) = bag.stop(now_ns(), hint) {
@@ -481,6 +484,7 @@ impl Inputs {
 /// calls are answered once the writer's reply arrives, on a later turn of the loop.
 struct Control {
     events: Subscription<StringMessage>,
+    simulation: Subscription<StringMessage>,
     task_success: Subscription<Bool>,
     start: Server<TriggerRequest, TriggerResponse>,
     stop: Server<TriggerRequest, TriggerResponse>,
@@ -513,6 +517,7 @@ impl Control {
     fn serve(node: &mut RosNode) -> Result<Self> {
         Ok(Self {
             events: node.subscription(topics::EPISODE_EVENTS, qos::command_subscription())?,
+            simulation: node.subscription(topics::SIM_EPISODE, qos::latched())?,
             task_success: node.subscription(topics::TASK_SUCCESS, qos::command_subscription())?,
             start: node.server::<Trigger>(services::RECORDER_START)?,
             stop: node.server::<Trigger>(services::RECORDER_STOP)?,
@@ -528,6 +533,11 @@ impl Control {
     fn take(&mut self, commands: &SyncSender<Command>) {
         while let Ok(Some((message, _))) = self.task_success.take() {
             self.last_task_success = Some(message.data);
+        }
+        while let Ok(Some((message, _))) = self.simulation.take() {
+            if commands.send(Command::Simulation(message.data)).is_err() {
+                tracing::error!("the writer thread is gone: the simulation's settings were lost");
+            }
         }
         while let Ok(Some((message, _))) = self.events.take() {
             match parse_event(&message.data) {

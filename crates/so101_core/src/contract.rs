@@ -26,6 +26,9 @@ pub mod topics {
     pub const CUBE_POSE: &str = "cube/pose";
     /// std_msgs/String, episode events (start, stop, success) from teleop to the recorder.
     pub const EPISODE_EVENTS: &str = "episode/events";
+    /// std_msgs/String, latched: JSON of what the sim simulates the current episode with (servo
+    /// model and parameters, randomization ranges and the episode's draw), after every reset.
+    pub const SIM_EPISODE: &str = "sim/episode";
     /// diagnostic_msgs/DiagnosticArray.
     pub const DIAGNOSTICS: &str = "diagnostics";
     /// rosgraph_msgs/Clock (sim time).
@@ -121,6 +124,7 @@ pub fn python_module() -> String {
         ("TASK_SUCCESS", topics::TASK_SUCCESS),
         ("CUBE_POSE", topics::CUBE_POSE),
         ("EPISODE_EVENTS", topics::EPISODE_EVENTS),
+        ("SIM_EPISODE", topics::SIM_EPISODE),
         ("DIAGNOSTICS", topics::DIAGNOSTICS),
         ("CLOCK", topics::CLOCK),
         ("CAMERA_PREFIX", topics::CAMERA_PREFIX),

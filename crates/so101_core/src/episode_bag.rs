@@ -19,6 +19,9 @@ pub mod custom_data {
     pub const SUCCESS: &str = "success";
     /// The sim's episode seed, empty when unknown.
     pub const SEED: &str = "seed";
+    /// JSON of what the sim simulated the episode with (/sim/episode: servo model, randomization
+    /// ranges and draw); empty on the real arm.
+    pub const SIMULATION: &str = "simulation";
 }
 
 /// The directory name of episode `index`.

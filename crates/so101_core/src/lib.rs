@@ -11,5 +11,6 @@ pub mod kinematics;
 pub mod robot;
 #[cfg(feature = "ros")]
 pub mod ros;
+pub mod servo;
 pub mod task;
 pub mod trajectory;

@@ -42,7 +42,7 @@ impl WorldBatch {
 impl WorldBatch {
     /// `threads`: worker threads stepping the worlds (0: one per CPU core).
     #[new]
-    #[pyo3(signature = (num_worlds, scene, lite = true, task = so101_core::task::TaskKind::CubeToBin.name(), control_rate = so101_core::task::CONTROL_RATE_HZ, dense_reward = false, seed = 0, threads = 0))]
+    #[pyo3(signature = (num_worlds, scene, lite = true, task = so101_core::task::TaskKind::CubeToBin.name(), control_rate = so101_core::task::CONTROL_RATE_HZ, dense_reward = false, seed = 0, threads = 0, servo_params = "sts3215", randomize = "off"))]
     #[allow(clippy::too_many_arguments)]
     fn new(
         num_worlds: usize,
@@ -53,11 +53,13 @@ impl WorldBatch {
         dense_reward: bool,
         seed: u64,
         threads: usize,
+        servo_params: &str,
+        randomize: &str,
     ) -> PyResult<Self> {
         if num_worlds == 0 {
             return Err(PyValueError::new_err("a batch needs at least one world"));
         }
-        let spec = WorldSpec::new(scene, lite, task, control_rate, dense_reward)?;
+        let spec = WorldSpec::new(scene, lite, task, control_rate, dense_reward, servo_params, randomize)?;
         let envs = (0..num_worlds as u64)
             .map(|index| spec.build(seed.wrapping_add(index)))
             .collect::<PyResult<Vec<_>>>()?;
@@ -89,6 +91,16 @@ impl WorldBatch {
             .ok_or_else(|| PyIndexError::new_err(format!("world {index} of {count}")))?;
         py.detach(|| env.reset(seed));
         Ok(())
+    }
+
+    /// JSON of world `index`'s current episode: servo model and parameters, randomization ranges
+    /// and draw (as World.episode_settings).
+    fn episode_settings(&mut self, index: usize) -> PyResult<String> {
+        let envs = &self.state().envs;
+        let env = envs
+            .get(index)
+            .ok_or_else(|| PyIndexError::new_err(format!("world {index} of {}", envs.len())))?;
+        Ok(so101_sim::provenance::episode_settings(env).to_string())
     }
 
     /// Starts a new episode in every world, in parallel; `seeds` (one per world) restart their

@@ -5,8 +5,10 @@ use std::sync::{Mutex, PoisonError};
 use numpy::{PyArray1, PyArray2, PyReadonlyArray1};
 use pyo3::{exceptions::PyValueError, prelude::*};
 use so101_core::robot::{JointPositions, JOINT_COUNT};
+use so101_core::servo::ServoModelChoice;
 use so101_sim::{
-    env::{TaskEnv, TaskSettings},
+    env::{SimOptions, TaskEnv, TaskSettings},
+    randomization::RandomizationConfig,
     scene,
     task::TaskKind,
 };
@@ -21,15 +23,21 @@ pub struct WorldSpec {
     pub task: TaskKind,
     pub control_rate: f64,
     pub dense_reward: bool,
+    pub options: SimOptions,
 }
 
 impl WorldSpec {
+    /// `servo_params`: `sts3215`, `gain80` or a parameter file (.json); `randomize`: `off`,
+    /// `default` or a randomization file (.toml).
+    #[allow(clippy::too_many_arguments)]
     pub fn new(
         scene: &str,
         lite: bool,
         task: &str,
         control_rate: f64,
         dense_reward: bool,
+        servo_params: &str,
+        randomize: &str,
     ) -> PyResult<Self> {
         if !(control_rate.is_finite() && control_rate > 0.0) {
             return Err(PyValueError::new_err(format!(
@@ -42,6 +50,17 @@ impl WorldSpec {
             task: task.parse().map_err(PyValueError::new_err)?,
             control_rate,
             dense_reward,
+            options: SimOptions {
+                servos: ServoModelChoice::parse(servo_params)
+                    .map_err(|error| PyValueError::new_err(error.to_string()))?,
+                randomization: match randomize {
+                    "off" => None,
+                    other => Some(
+                        RandomizationConfig::parse(other)
+                            .map_err(|error| PyValueError::new_err(error.to_string()))?,
+                    ),
+                },
+            },
         })
     }
 
@@ -53,7 +72,13 @@ impl WorldSpec {
             kind: self.task,
             dense_reward: self.dense_reward,
         };
-        TaskEnv::new(simulation, self.control_rate, settings, seed)
+        TaskEnv::with_options(
+            simulation,
+            self.control_rate,
+            settings,
+            seed,
+            self.options.clone(),
+        )
             .map_err(|error| PyValueError::new_err(error.to_string()))
     }
 }
@@ -108,7 +133,8 @@ impl World {
 #[pymethods]
 impl World {
     #[new]
-    #[pyo3(signature = (scene, lite = true, task = so101_core::task::TaskKind::CubeToBin.name(), control_rate = so101_core::task::CONTROL_RATE_HZ, dense_reward = false, seed = 0))]
+    #[pyo3(signature = (scene, lite = true, task = so101_core::task::TaskKind::CubeToBin.name(), control_rate = so101_core::task::CONTROL_RATE_HZ, dense_reward = false, seed = 0, servo_params = "sts3215", randomize = "off"))]
+    #[allow(clippy::too_many_arguments)]
     fn new(
         scene: &str,
         lite: bool,
@@ -116,8 +142,10 @@ impl World {
         control_rate: f64,
         dense_reward: bool,
         seed: u64,
+        servo_params: &str,
+        randomize: &str,
     ) -> PyResult<Self> {
-        let spec = WorldSpec::new(scene, lite, task, control_rate, dense_reward)?;
+        let spec = WorldSpec::new(scene, lite, task, control_rate, dense_reward, servo_params, randomize)?;
         Ok(Self {
             inner: Mutex::new(WorldState {
                 env: spec.build(seed)?,
@@ -171,6 +199,13 @@ impl World {
     #[getter]
     fn divergences(&mut self) -> u64 {
         self.state().env.divergences
+    }
+
+    /// JSON: the servo model and its parameters, the randomization ranges and the current
+    /// episode's draw (null without randomization).
+    #[getter]
+    fn episode_settings(&mut self) -> String {
+        so101_sim::provenance::episode_settings(&self.state().env).to_string()
     }
 
     /// float64[6, 2]: (min, max) of each joint, rad.

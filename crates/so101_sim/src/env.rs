@@ -2,11 +2,15 @@
 //! in-process): a world, the task that scores it, and the seeded sequence of cube placements.
 //! One source for resets, physics, reward and success, whichever door is used.
 
-use so101_core::robot::{JointPositions, JOINT_COUNT};
+use so101_core::{
+    robot::{JointPositions, JOINT_COUNT},
+    servo::{ArmServoParams, ServoModelChoice},
+};
 
 use crate::{
     mujoco::Simulation,
     placement::{CubePlacer, CubeStart, SpawnArea},
+    randomization::{EpisodeDraw, ObservationNoise, RandomizationConfig, Randomizer, SceneLook},
     task::{self, TaskKind, TaskOutcome},
     world::{ArmState, CubePose, World, WorldError},
 };
@@ -57,10 +61,31 @@ impl Observation {
 /// Length of [`Observation::state_vector`].
 pub const STATE_SIZE: usize = 2 * JOINT_COUNT + 7;
 
+/// How the simulation departs from the scene as written: the servo model, and the ranges of the
+/// domain randomization (none: every episode as the scene is written).
+#[derive(Debug, Clone, Default)]
+pub struct SimOptions {
+    pub servos: ServoModelChoice,
+    pub randomization: Option<RandomizationConfig>,
+}
+
+/// The randomization of an env: its draws, the scene's nominal look and servos, and the current
+/// episode's draw and noise.
+struct Randomized {
+    randomizer: Randomizer,
+    look: SceneLook,
+    servos: Option<ArmServoParams>,
+    draw: Option<EpisodeDraw>,
+    noise: Option<ObservationNoise>,
+    /// The noise of the current observation: joints (rad) and cube position (m).
+    current: ([f64; JOINT_COUNT], [f64; 3]),
+}
+
 pub struct TaskEnv {
     world: World,
     settings: TaskSettings,
     placer: CubePlacer,
+    randomized: Option<Randomized>,
     /// Physics divergences (MuJoCo reset its state; the episode restarted from its start).
     pub divergences: u64,
 }
@@ -74,12 +99,43 @@ impl TaskEnv {
         settings: TaskSettings,
         seed: u64,
     ) -> Result<Self, WorldError> {
+        Self::with_options(sim, control_rate, settings, seed, SimOptions::default())
+    }
+
+    /// As [`TaskEnv::new`], with the servo model (and randomization) of `options`.
+    pub fn with_options(
+        sim: Simulation,
+        control_rate: f64,
+        settings: TaskSettings,
+        seed: u64,
+        options: SimOptions,
+    ) -> Result<Self, WorldError> {
+        let world = World::with_servos(sim, 1.0 / control_rate, options.servos)?;
+        let randomized = options.randomization.map(|config| Randomized {
+            randomizer: Randomizer::new(config, seed),
+            look: SceneLook::capture(world.simulation()),
+            servos: world.servos().params().copied(),
+            draw: None,
+            noise: None,
+            current: ([0.0; JOINT_COUNT], [0.0; 3]),
+        });
         Ok(Self {
-            world: World::new(sim, 1.0 / control_rate)?,
+            world,
             settings,
             placer: CubePlacer::new(CUBE_SPAWN_AREA, seed),
+            randomized,
             divergences: 0,
         })
+    }
+
+    /// The current episode's randomization draw (none without randomization, or before a reset).
+    pub fn draw(&self) -> Option<&EpisodeDraw> {
+        self.randomized.as_ref().and_then(|r| r.draw.as_ref())
+    }
+
+    /// The randomization ranges in use, if any.
+    pub fn randomization(&self) -> Option<&RandomizationConfig> {
+        self.randomized.as_ref().map(|r| &r.randomizer.config)
     }
 
     pub fn world(&self) -> &World {
@@ -104,11 +160,43 @@ impl TaskEnv {
     pub fn reset(&mut self, seed: Option<u64>) -> CubeStart {
         if let Some(seed) = seed {
             self.placer = CubePlacer::new(CUBE_SPAWN_AREA, seed);
+            if let Some(randomized) = &mut self.randomized {
+                randomized.randomizer.reseed(seed);
+            }
         }
         let start = self.placer.next_start();
+        self.randomize_episode();
         self.world.reset(Some(start));
         self.world.settle(SETTLE_SECONDS);
+        self.next_noise();
         start
+    }
+
+    /// Draws the next episode's changes and puts them into the world.
+    fn randomize_episode(&mut self) {
+        let Some(randomized) = &mut self.randomized else {
+            return;
+        };
+        let draw = randomized.randomizer.next_draw(&randomized.look);
+        randomized.look.apply(self.world.simulation_mut(), &draw);
+        self.world.set_cube_scales(
+            draw.cube_size_scale,
+            draw.cube_mass_scale,
+            draw.cube_friction_scale,
+        );
+        if let Some(nominal) = randomized.servos {
+            self.world.set_servo_params(scaled_servos(&nominal, &draw));
+        }
+        randomized.noise = Some(ObservationNoise::new(&draw));
+        randomized.draw = Some(draw);
+    }
+
+    fn next_noise(&mut self) {
+        if let Some(randomized) = &mut self.randomized {
+            if let Some(noise) = &mut randomized.noise {
+                randomized.current = noise.sample();
+            }
+        }
     }
 
     /// One control period towards `targets` (clamped to the joint limits; non-finite values keep
@@ -130,6 +218,7 @@ impl TaskEnv {
         if !ok {
             self.divergences += 1;
         }
+        self.next_noise();
         ok
     }
 
@@ -142,12 +231,40 @@ impl TaskEnv {
         )
     }
 
+    /// What a policy sees: with randomization, joint positions and the cube's position carry
+    /// the episode's observation noise (reward and success are of the true state).
     pub fn observe(&self) -> Observation {
+        let mut arm = self.world.arm_state();
+        let mut cube = self.world.cube_pose();
+        if let Some(randomized) = &self.randomized {
+            let (joints, position) = randomized.current;
+            for joint in 0..JOINT_COUNT {
+                arm.position[joint] += joints[joint];
+            }
+            for axis in 0..3 {
+                cube.position[axis] += position[axis];
+            }
+        }
         Observation {
             time: self.world.time(),
-            arm: self.world.arm_state(),
-            cube: self.world.cube_pose(),
+            arm,
+            cube,
             outcome: self.outcome(),
         }
     }
+}
+
+/// The nominal servos with one episode's departures.
+fn scaled_servos(nominal: &ArmServoParams, draw: &EpisodeDraw) -> ArmServoParams {
+    let mut params = *nominal;
+    for (servo, change) in params.0.iter_mut().zip(&draw.servos) {
+        let mechanics = &mut servo.mechanics;
+        mechanics.gain_per_p *= change.gain_scale;
+        mechanics.damping_per_d *= change.damping_scale;
+        mechanics.damping *= change.damping_scale;
+        mechanics.friction *= change.friction_scale;
+        mechanics.armature *= change.armature_scale;
+        mechanics.latency += change.extra_latency;
+    }
+    params
 }

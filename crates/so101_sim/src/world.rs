@@ -2,11 +2,15 @@
 //! stack's view (joints in contract order, cube pose, task observation).
 
 use nalgebra::{Matrix3, Vector3};
-use so101_core::robot::{JointLimit, JointPositions, JOINT_COUNT, JOINT_NAMES};
+use so101_core::{
+    robot::{JointLimit, JointPositions, JOINT_COUNT, JOINT_NAMES},
+    servo::{ArmServoParams, ServoModelChoice},
+};
 
 use crate::{
     mujoco::{MujocoError, ObjectKind, Simulation},
     placement::CubeStart,
+    servos::ArmServos,
     task::{OrientedBox, TaskObservation},
     timing::steps_in_period,
 };
@@ -38,6 +42,15 @@ pub struct CubePose {
     pub orientation: [f64; 4],
 }
 
+#[derive(Debug, Clone, Copy)]
+struct NominalCube {
+    rest_height: f64,
+    half_extents: [f64; 3],
+    mass: f64,
+    inertia: [f64; 3],
+    friction: [f64; 3],
+}
+
 /// Indices into the model, resolved once by name.
 struct SceneIds {
     joint_qpos: [usize; JOINT_COUNT],
@@ -58,11 +71,14 @@ struct SceneIds {
 pub struct World {
     sim: Simulation,
     ids: SceneIds,
+    servos: ArmServos,
     limits: [JointLimit; JOINT_COUNT],
     targets: JointPositions,
     timestep: f64,
     control_period: f64,
     cube_rest_height: f64,
+    /// The cube as the scene writes it: rest height, half extents, mass, inertia, friction.
+    nominal_cube: NominalCube,
     /// Sim time at which the current episode started: MuJoCo restarts its clock at every reset,
     /// but /clock must never go backwards.
     episode_start_time: f64,
@@ -83,8 +99,18 @@ fn require(sim: &Simulation, kind: ObjectKind, name: &str) -> Result<usize, Worl
 }
 
 impl World {
-    /// Binds the scene: every joint, actuator, site and body the node uses must exist by name.
+    /// Binds the scene with the default servo model (the STS3215): every joint, actuator, site
+    /// and body the node uses must exist by name.
     pub fn new(sim: Simulation, control_period: f64) -> Result<Self, WorldError> {
+        Self::with_servos(sim, control_period, ServoModelChoice::default())
+    }
+
+    /// Binds the scene with the given servo model driving the arm.
+    pub fn with_servos(
+        mut sim: Simulation,
+        control_period: f64,
+        servos: ServoModelChoice,
+    ) -> Result<Self, WorldError> {
         let timestep = sim.timestep();
         if control_period.is_nan() || control_period < timestep {
             return Err(WorldError::Period {
@@ -121,14 +147,25 @@ impl World {
             bin_inside_site: require(&sim, ObjectKind::Site, "bin_inside")?,
         };
         let cube_rest_height = sim.qpos()[ids.cube_qpos + 2];
+        let (mass, inertia) = sim.body_mass(ids.cube_body);
+        let nominal_cube = NominalCube {
+            rest_height: cube_rest_height,
+            half_extents: sim.geom_size(ids.cube_geom),
+            mass,
+            inertia,
+            friction: sim.geom_friction(ids.cube_geom),
+        };
+        let servos = ArmServos::install(servos, &mut sim, &ids.actuator, &ids.joint_dof);
         let mut world = Self {
             sim,
             ids,
+            servos,
             limits,
             targets: [0.0; JOINT_COUNT],
             timestep,
             control_period,
             cube_rest_height,
+            nominal_cube,
             episode_start_time: 0.0,
             episode_periods: 0,
             episode_steps: 0,
@@ -147,6 +184,40 @@ impl World {
     /// The MuJoCo simulation itself, for the camera rig (rendering reads the state, never steps).
     pub fn simulation_mut(&mut self) -> &mut Simulation {
         &mut self.sim
+    }
+
+    /// The servo model driving the arm.
+    pub fn servos(&self) -> &ArmServos {
+        &self.servos
+    }
+
+    /// Replaces the STS3215 model's parameters (no effect on the gain-80 servos), from the next
+    /// physics step on.
+    pub fn set_servo_params(&mut self, params: ArmServoParams) {
+        if self.servos.params().is_some() {
+            self.servos = ArmServos::install(
+                ServoModelChoice::Sts3215(params),
+                &mut self.sim,
+                &self.ids.actuator,
+                &self.ids.joint_dof,
+            );
+        }
+    }
+
+    /// The cube scaled from the scene's: edge (`size`), mass and inertia (`mass`), sliding
+    /// friction (`friction`). Its rest height follows its size; takes effect at the next reset.
+    pub fn set_cube_scales(&mut self, size: f64, mass: f64, friction: f64) {
+        let nominal = self.nominal_cube;
+        let half = nominal.half_extents.map(|value| value * size);
+        self.sim.set_geom_size(self.ids.cube_geom, half);
+        // A uniform box: inertia grows with mass and with the square of the size.
+        let inertia = nominal.inertia.map(|value| value * mass * size * size);
+        self.sim
+            .set_body_mass(self.ids.cube_body, nominal.mass * mass, inertia);
+        let mut sliding = nominal.friction;
+        sliding[0] *= friction;
+        self.sim.set_geom_friction(self.ids.cube_geom, sliding);
+        self.cube_rest_height = nominal.rest_height + (half[2] - nominal.half_extents[2]);
     }
 
     /// Joint limits as the scene declares them (commands are clamped to these).
@@ -191,6 +262,7 @@ impl World {
         }
         let cube_dof = self.ids.cube_dof;
         self.sim.qvel_mut()[cube_dof..cube_dof + 6].fill(0.0);
+        self.servos.hold(&self.targets);
         self.write_controls();
         self.sim.forward();
     }
@@ -200,11 +272,7 @@ impl World {
     pub fn settle(&mut self, seconds: f64) {
         let steps = (seconds / self.timestep).round().max(0.0) as u64;
         self.write_controls();
-        for _ in 0..steps {
-            self.sim.step();
-        }
-        self.episode_steps += steps;
-        self.total_steps += steps;
+        self.physics_steps(steps);
         self.sim.refresh_kinematics();
     }
 
@@ -215,12 +283,8 @@ impl World {
     pub fn advance(&mut self) -> bool {
         self.write_controls();
         let steps = steps_in_period(self.episode_periods, self.control_period, self.timestep);
-        for _ in 0..steps {
-            self.sim.step();
-        }
+        self.physics_steps(steps);
         self.episode_periods += 1;
-        self.episode_steps += steps;
-        self.total_steps += steps;
         // Poses (/cube/pose, the task's sites, camera frames) of the state published, not of the
         // one before the last step's integration.
         self.sim.refresh_kinematics();
@@ -234,12 +298,44 @@ impl World {
         false
     }
 
+    /// `steps` physics steps; the STS3215 model recomputes its torques before each. Counts them
+    /// in the episode's and the world's totals.
+    fn physics_steps(&mut self, steps: u64) {
+        for _ in 0..steps {
+            if self.servos.per_step() {
+                self.write_servo_torques();
+            }
+            self.sim.step();
+            self.episode_steps += 1;
+        }
+        self.total_steps += steps;
+    }
+
+    /// Sends the targets to the servos (at the episode's time) and writes the controls.
     fn write_controls(&mut self) {
+        let time = self.episode_steps as f64 * self.timestep;
+        self.servos.command(time, &self.targets);
+        if self.servos.per_step() {
+            self.write_servo_torques();
+        } else {
+            self.write_ctrl(self.targets);
+        }
+    }
+
+    fn write_servo_torques(&mut self) {
+        let time = self.episode_steps as f64 * self.timestep;
+        let arm = self.arm_state();
+        let torques =
+            self.servos
+                .controls(time, &self.targets, &arm.position, &arm.velocity, self.timestep);
+        self.write_ctrl(torques);
+    }
+
+    fn write_ctrl(&mut self, values: JointPositions) {
         let actuator = self.ids.actuator;
-        let targets = self.targets;
         let ctrl = self.sim.ctrl_mut();
         for joint in 0..JOINT_COUNT {
-            ctrl[actuator[joint]] = targets[joint];
+            ctrl[actuator[joint]] = values[joint];
         }
     }
 

@@ -193,3 +193,35 @@ fn task_env_resets_settle_the_arm_and_seeds_repeat_episodes() {
     assert_eq!(held[0], 0.4);
     assert_eq!(held[5], limits[5].max);
 }
+
+#[test]
+fn the_emulators_joint_loads_are_the_scenes_at_home() {
+    use so101_core::servo::ARM_LOADS;
+    let simulation = scene::load(&PathBuf::from(DEFAULT_SCENE), true).expect("the scene loads");
+    let world = World::new(simulation, 1.0 / RATE_HZ).expect("the scene binds");
+    let sim = world.simulation();
+    let mut scene_loads = Vec::new();
+    for joint in 0..JOINT_COUNT {
+        let id = sim
+            .id(so101_sim::mujoco::ObjectKind::Joint, so101_core::robot::JOINT_NAMES[joint])
+            .expect("every joint is in the scene");
+        let dof = sim.joint_dof_address(id);
+        let (_, _, armature) = sim.dof_friction(dof);
+        let inertia = sim.dof_inertia(dof) - armature;
+        let gravity = sim.dof_bias(dof);
+        println!("joint {joint}: inertia {inertia:.6} gravity {gravity:.4}");
+        scene_loads.push((inertia, gravity));
+    }
+    for (joint, (load, (inertia, gravity))) in ARM_LOADS.iter().zip(scene_loads).enumerate() {
+        assert!(
+            (load.inertia - inertia).abs() <= 0.1 * inertia.abs() + 1e-5,
+            "joint {joint}: inertia {inertia} in the scene, {} in ARM_LOADS",
+            load.inertia
+        );
+        assert!(
+            (load.gravity_torque - gravity).abs() <= 0.1 * gravity.abs() + 1e-3,
+            "joint {joint}: gravity {gravity} in the scene, {} in ARM_LOADS",
+            load.gravity_torque
+        );
+    }
+}

@@ -2,11 +2,14 @@
 
 use std::path::PathBuf;
 
-use so101_core::{contract::CAMERA_NAMES, ros::NodeArgs, task::CONTROL_RATE_HZ};
+use so101_core::{
+    contract::CAMERA_NAMES, ros::NodeArgs, servo::ServoModelChoice, task::CONTROL_RATE_HZ,
+};
 
 use so101_sim::{
     cameras::spec::{self, CameraList, FrameSize},
     offscreen::RendererChoice,
+    randomization::RandomizationConfig,
     task::TaskKind,
 };
 
@@ -75,6 +78,15 @@ pub struct Args {
     /// Render shadows (costly on a CPU rasteriser).
     #[arg(long)]
     pub camera_shadows: bool,
+    /// The servos' model: "sts3215" (the STS3215 as LeRobot configures it, published mechanics),
+    /// "gain80" (the scene's first position servos, for comparison) or a parameter file (.json)
+    /// from `so101-sysid fit`.
+    #[arg(long, default_value = "sts3215", value_parser = parse_servo_params)]
+    pub servo_params: String,
+    /// Domain randomization at every /sim/reset: "off", "default" (assets/randomization.toml) or
+    /// a file of ranges (.toml). Each episode's draw is published on /sim/episode.
+    #[arg(long, default_value = "off", value_parser = parse_randomize)]
+    pub randomize: String,
     /// Exit cleanly after this many seconds of wall time.
     #[arg(long, value_parser = parse_duration)]
     pub duration: Option<f64>,
@@ -84,6 +96,28 @@ pub struct Args {
 
 pub fn default_scene() -> &'static str {
     so101_core::robot::DEFAULT_SCENE
+}
+
+/// Checks the preset or file now (a usage error rather than a failure at start).
+fn parse_servo_params(text: &str) -> Result<String, String> {
+    ServoModelChoice::parse(text).map_err(|error| error.to_string())?;
+    Ok(text.to_owned())
+}
+
+/// Checks the file now, so a bad one is a usage error rather than a failure at start.
+fn parse_randomize(text: &str) -> Result<String, String> {
+    if text != "off" {
+        RandomizationConfig::parse(text).map_err(|error| error.to_string())?;
+    }
+    Ok(text.to_owned())
+}
+
+/// The randomization `--randomize` asks for.
+pub fn randomization(text: &str) -> anyhow::Result<Option<RandomizationConfig>> {
+    if text == "off" {
+        return Ok(None);
+    }
+    Ok(Some(RandomizationConfig::parse(text)?))
 }
 
 fn parse_rate(text: &str) -> Result<f64, String> {

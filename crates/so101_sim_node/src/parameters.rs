@@ -45,6 +45,10 @@ pub fn declarations(args: &Args, limits: &[JointLimit; JOINT_COUNT]) -> Paramete
         ),
         options.declare("rate", Value::Double(args.rate)),
         options
+            .declare("servo_params", text(&args.servo_params))
+            .effect("\"sts3215\", \"gain80\" or the parameter file's path."),
+        options.declare("randomize", text(&args.randomize)),
+        options
             .declare("speed", Value::String(speed))
             .effect("\"lockstep\" under --lockstep."),
         options.declare("lockstep", Value::Bool(args.lockstep)),

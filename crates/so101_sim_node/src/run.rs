@@ -7,21 +7,27 @@ use std::{
 };
 
 use anyhow::{Context, Result};
-use so101_core::ros::{
-    arm_controller::ArmController, command_inbox::CommandInbox, parameters::ParameterServer,
-    shutdown::Shutdown, RosNode,
+use ros2_client::Publisher;
+use so101_core::{
+    contract::topics,
+    ros::{
+        arm_controller::ArmController, command_inbox::CommandInbox, parameters::ParameterServer,
+        qos, shutdown::Shutdown, RosNode,
+    },
 };
+use so101_core::servo::ServoModelChoice;
+use so101_msgs::std_msgs::String as StringMessage;
 
 use so101_sim::{
     cameras::rig::{CameraRig, RigOptions},
     demo::{Script, PICK_AND_PLACE},
-    env::{TaskEnv, TaskSettings},
+    env::{SimOptions, TaskEnv, TaskSettings},
     mujoco, scene,
 };
 
 use crate::{
     cameras::publish::{publish_batches, CameraTopics},
-    cli::Args,
+    cli::{self, Args},
     pacing::{Pacer, TimeMode},
     parameters::{self, Setting},
     ros_io::{Frame, FramePublisher, NodeDiagnostics, PendingCall, SimServices},
@@ -50,7 +56,11 @@ pub fn run(args: Args) -> Result<()> {
         kind: args.task,
         dense_reward: args.dense_reward,
     };
-    let env = TaskEnv::new(simulation, args.rate, settings, args.seed)
+    let options = SimOptions {
+        servos: ServoModelChoice::parse(&args.servo_params)?,
+        randomization: cli::randomization(&args.randomize)?,
+    };
+    let env = TaskEnv::with_options(simulation, args.rate, settings, args.seed, options)
         .context("the scene does not fit the node")?;
     let time_mode = if args.lockstep {
         TimeMode::Lockstep
@@ -64,6 +74,8 @@ pub fn run(args: Args) -> Result<()> {
         task = ?args.task,
         rate_hz = args.rate,
         timestep = env.world().timestep(),
+        servos = %args.servo_params,
+        randomize = %args.randomize,
         mode = ?time_mode,
         "simulation ready"
     );
@@ -73,6 +85,7 @@ pub fn run(args: Args) -> Result<()> {
     let inbox = CommandInbox::subscribe(&mut node)?;
     let arm = ArmController::serve(&mut node)?;
     let services = SimServices::serve(&mut node)?;
+    let episode_settings = node.publisher(topics::SIM_EPISODE, qos::latched())?;
     let cameras = start_cameras(&args, time_mode, &env, &mut node)?;
     let parameters = ParameterServer::start(
         &mut node,
@@ -98,6 +111,7 @@ pub fn run(args: Args) -> Result<()> {
         inbox,
         arm,
         services,
+        episode_settings,
         parameters,
         pacer,
         cameras,
@@ -152,6 +166,8 @@ struct SimLoop {
     /// Trajectories (topic and FollowJointTrajectory action).
     arm: ArmController,
     services: SimServices,
+    /// /sim/episode: what the current episode is simulated with.
+    episode_settings: Publisher<StringMessage>,
     parameters: ParameterServer,
     pacer: Pacer,
     demo: Option<Script>,
@@ -183,6 +199,7 @@ impl SimLoop {
         let mut last_lockstep_work = started.0;
         let commands_step = self.time_mode == TimeMode::Lockstep && self.args.step_on_command;
         self.publish(None);
+        self.publish_episode_settings();
         while !shutdown.is_requested() && deadline.is_none_or(|deadline| Instant::now() < deadline)
         {
             let intake_due =
@@ -285,10 +302,18 @@ impl SimLoop {
         }
     }
 
+    fn publish_episode_settings(&self) {
+        let settings = so101_sim::provenance::episode_settings(&self.env).to_string();
+        if let Err(error) = self.episode_settings.publish(StringMessage { data: settings }) {
+            tracing::warn!("cannot publish /sim/episode: {error:?}");
+        }
+    }
+
     fn serve_resets(&mut self) {
         while let Some(call) = self.services.next_reset() {
             self.arm.preempt("the simulation was reset");
             let start = self.env.reset(None);
+            self.publish_episode_settings();
             if let Some(rig) = &mut self.cameras {
                 rig.restart(self.env.world().time());
             }

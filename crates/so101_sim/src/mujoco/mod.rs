@@ -3,6 +3,7 @@
 //! (the generated bindings are private to it).
 #![allow(unsafe_code)]
 
+mod edit;
 mod ffi;
 pub mod render;
 
@@ -34,6 +35,8 @@ pub enum ObjectKind {
     Site,
     Actuator,
     Camera,
+    Material,
+    Light,
 }
 
 impl ObjectKind {
@@ -45,6 +48,8 @@ impl ObjectKind {
             Self::Site => ffi::mjOBJ_SITE,
             Self::Actuator => ffi::mjOBJ_ACTUATOR,
             Self::Camera => ffi::mjOBJ_CAMERA,
+            Self::Material => ffi::mjOBJ_MATERIAL,
+            Self::Light => ffi::mjOBJ_LIGHT,
         }) as i32
     }
 }

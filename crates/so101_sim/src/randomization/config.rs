@@ -1,0 +1,201 @@
+//! The randomization ranges: assets/randomization.toml (embedded, the defaults) with a user's file
+//! over it.
+
+use std::path::Path;
+
+use serde::{Deserialize, Serialize};
+
+/// The project's documented defaults, compiled in so every door has them without a path.
+pub const DEFAULT_TOML: &str = include_str!("../../../../assets/randomization.toml");
+
+/// A closed interval to draw from uniformly.
+pub type Range = [f64; 2];
+
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct RandomizationConfig {
+    pub cube: CubeRanges,
+    pub scene: SceneRanges,
+    pub lighting: LightingRanges,
+    pub cameras: CameraRanges,
+    pub servos: ServoRanges,
+    pub observation: ObservationNoise,
+}
+
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct CubeRanges {
+    pub size_scale: Range,
+    pub mass_scale: Range,
+    pub friction_scale: Range,
+    pub colour_jitter: f64,
+}
+
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SceneRanges {
+    pub table_colour_jitter: f64,
+    pub bin_colour_jitter: f64,
+}
+
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct LightingRanges {
+    pub direction_jitter: f64,
+    pub intensity_scale: Range,
+    pub ambient: Range,
+}
+
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct CameraRanges {
+    pub position_jitter: f64,
+    pub fovy_jitter: f64,
+}
+
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ServoRanges {
+    pub gain_scale: Range,
+    pub damping_scale: Range,
+    pub friction_scale: Range,
+    pub armature_scale: Range,
+    pub latency: Range,
+}
+
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ObservationNoise {
+    pub joint_noise: f64,
+    pub cube_position_noise: f64,
+}
+
+#[derive(Debug, thiserror::Error)]
+pub enum ConfigError {
+    #[error("cannot read the randomization file {path}: {source}")]
+    Read {
+        path: String,
+        source: std::io::Error,
+    },
+    #[error("randomization {path}: {message}")]
+    Invalid { path: String, message: String },
+}
+
+impl RandomizationConfig {
+    /// The defaults of assets/randomization.toml.
+    pub fn defaults() -> Self {
+        Self::from_toml(DEFAULT_TOML, "defaults").expect("the embedded defaults are valid")
+    }
+
+    /// A user's file: its keys over the defaults.
+    pub fn load(path: &Path) -> Result<Self, ConfigError> {
+        let text = std::fs::read_to_string(path).map_err(|source| ConfigError::Read {
+            path: path.display().to_string(),
+            source,
+        })?;
+        Self::from_toml(&text, &path.display().to_string())
+    }
+
+    /// `default` or the path of a TOML file.
+    pub fn parse(text: &str) -> Result<Self, ConfigError> {
+        if text == "default" {
+            Ok(Self::defaults())
+        } else {
+            Self::load(Path::new(text))
+        }
+    }
+
+    pub fn from_toml(text: &str, name: &str) -> Result<Self, ConfigError> {
+        let invalid = |message: String| ConfigError::Invalid {
+            path: name.to_owned(),
+            message,
+        };
+        let mut merged: toml::Table = DEFAULT_TOML
+            .parse()
+            .map_err(|error: toml::de::Error| invalid(error.to_string()))?;
+        let user: toml::Table = text
+            .parse()
+            .map_err(|error: toml::de::Error| invalid(error.to_string()))?;
+        for (section, values) in user {
+            match (merged.get_mut(&section), values) {
+                (Some(toml::Value::Table(base)), toml::Value::Table(values)) => base.extend(values),
+                _ => return Err(invalid(format!("unknown section [{section}]"))),
+            }
+        }
+        let config: Self = toml::Value::Table(merged)
+            .try_into()
+            .map_err(|error: toml::de::Error| invalid(error.to_string()))?;
+        config.check().map_err(invalid)?;
+        Ok(config)
+    }
+
+    /// Ranges ordered and finite, scales positive, jitters and noise not negative.
+    fn check(&self) -> Result<(), String> {
+        let ranges = [
+            ("cube.size_scale", self.cube.size_scale, true),
+            ("cube.mass_scale", self.cube.mass_scale, true),
+            ("cube.friction_scale", self.cube.friction_scale, true),
+            ("lighting.intensity_scale", self.lighting.intensity_scale, false),
+            ("lighting.ambient", self.lighting.ambient, false),
+            ("servos.gain_scale", self.servos.gain_scale, true),
+            ("servos.damping_scale", self.servos.damping_scale, false),
+            ("servos.friction_scale", self.servos.friction_scale, false),
+            ("servos.armature_scale", self.servos.armature_scale, false),
+            ("servos.latency", self.servos.latency, false),
+        ];
+        for (name, [low, high], positive) in ranges {
+            let floor_ok = if positive { low > 0.0 } else { low >= 0.0 };
+            if !(low.is_finite() && high.is_finite() && low <= high && floor_ok) {
+                return Err(format!(
+                    "{name} = [{low}, {high}] must be finite, low <= high, and low {}",
+                    if positive { "> 0" } else { ">= 0" }
+                ));
+            }
+        }
+        if self.servos.latency[1] > so101_core::servo::params::MAX_LATENCY {
+            return Err("servos.latency above 0.5 s".to_owned());
+        }
+        let amounts = [
+            ("cube.colour_jitter", self.cube.colour_jitter),
+            ("scene.table_colour_jitter", self.scene.table_colour_jitter),
+            ("scene.bin_colour_jitter", self.scene.bin_colour_jitter),
+            ("lighting.direction_jitter", self.lighting.direction_jitter),
+            ("cameras.position_jitter", self.cameras.position_jitter),
+            ("cameras.fovy_jitter", self.cameras.fovy_jitter),
+            ("observation.joint_noise", self.observation.joint_noise),
+            ("observation.cube_position_noise", self.observation.cube_position_noise),
+        ];
+        for (name, value) in amounts {
+            if !(value.is_finite() && value >= 0.0) {
+                return Err(format!("{name} = {value} must be finite and not negative"));
+            }
+        }
+        Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_users_file_overrides_only_its_keys() {
+        let config =
+            RandomizationConfig::from_toml("[cube]\nmass_scale = [1.0, 2.0]\n", "test").unwrap();
+        assert_eq!(config.cube.mass_scale, [1.0, 2.0]);
+        assert_eq!(config.cube.size_scale, RandomizationConfig::defaults().cube.size_scale);
+    }
+
+    #[test]
+    fn bad_files_name_what_is_wrong() {
+        let error = |text| {
+            RandomizationConfig::from_toml(text, "mine.toml")
+                .unwrap_err()
+                .to_string()
+        };
+        assert!(error("[cube]\nmass_scale = [2.0, 1.0]\n").contains("cube.mass_scale"));
+        assert!(error("[cube]\nweight = 3\n").contains("weight"));
+        assert!(error("[sky]\nblue = 1\n").contains("[sky]"));
+        assert!(error("[observation]\njoint_noise = -1.0\n").contains("joint_noise"));
+    }
+}
