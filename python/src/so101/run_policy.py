@@ -197,6 +197,8 @@ def evaluate(args, policy: StackPolicy) -> int:
             lite=args.lite,
             cameras=env_cameras or None,
             dense_reward=args.reward == "dense",
+            servo_params=args.servo_params,
+            randomize=args.randomize,
         )
         try:
             results += run_episodes(
@@ -220,6 +222,8 @@ def evaluate(args, policy: StackPolicy) -> int:
         backend=args.backend,
         fps=args.fps,
         episode_time_s=args.episode_time,
+        servo_params=args.servo_params,
+        randomize=args.randomize,
     )
     write_report(Path(args.output), summary, results)
     return 0
@@ -290,6 +294,20 @@ def parser() -> argparse.ArgumentParser:
         "which shows how close a failed episode came",
     )
     ev.add_argument("--lite", action="store_true", help="sim without meshes (faster to render on a CPU)")
+    ev.add_argument(
+        "--servo-params",
+        default="sts3215",
+        help="the sim's servo model: sts3215 (default), gain80, or a parameter file from so101-sysid fit",
+    )
+    ev.add_argument(
+        "--randomize",
+        nargs="?",
+        const="default",
+        default="off",
+        metavar="RANGES",
+        help="domain randomization of every episode, seeded by its seed: the default ranges "
+        "(assets/randomization.toml) or a .toml of your own",
+    )
     ev.add_argument(
         "--video-camera",
         default=None,

@@ -13,6 +13,8 @@ next-step autoreset), not N processes: what `gym.make_vec(id, num_envs=N)` gives
 
 from __future__ import annotations
 
+import json
+
 import gymnasium as gym
 import numpy as np
 from gymnasium.vector import AutoresetMode, VectorEnv
@@ -44,6 +46,8 @@ class So101InProcessEnv(gym.Env):
         render_size: tuple[int, int] = (240, 320),
         renderer: str = "auto",
         scene: str | None = None,
+        servo_params: str = "sts3215",
+        randomize: str = "off",
     ):
         import so101_native
 
@@ -55,7 +59,13 @@ class So101InProcessEnv(gym.Env):
         self._render_camera = render_camera
         self.metadata = {**self.metadata, "render_fps": control_rate}
         self._world = so101_native.World(
-            scene or default_scene(), lite=lite, task=task, control_rate=control_rate, dense_reward=dense_reward
+            scene or default_scene(),
+            lite=lite,
+            task=task,
+            control_rate=control_rate,
+            dense_reward=dense_reward,
+            servo_params=servo_params,
+            randomize=randomize,
         )
         rendered = dict(self._cameras)
         if render_mode == "rgb_array":
@@ -79,7 +89,8 @@ class So101InProcessEnv(gym.Env):
         super().reset(seed=seed)
         x, y, yaw = self._world.reset(seed)
         observation, _, success = self._observe()
-        return observation, {"is_success": success, "cube_start": (x, y, yaw)}
+        settings = json.loads(self._world.episode_settings)
+        return observation, {"is_success": success, "cube_start": (x, y, yaw), "episode_settings": settings}
 
     def step(self, action):
         self._world.step(checked_action(action))
@@ -117,6 +128,8 @@ class So101VectorEnv(VectorEnv):
         threads: int = 0,
         renderer: str = "auto",
         scene: str | None = None,
+        servo_params: str = "sts3215",
+        randomize: str = "off",
         **_ignored,
     ):
         import so101_native
@@ -135,6 +148,8 @@ class So101VectorEnv(VectorEnv):
             control_rate=control_rate,
             dense_reward=dense_reward,
             threads=threads,
+            servo_params=servo_params,
+            randomize=randomize,
         )
         if self._cameras:
             self._batch.enable_cameras(list(self._cameras.items()), renderer=renderer)

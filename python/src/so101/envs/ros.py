@@ -15,6 +15,7 @@ rclpy is imported when an env is built, not with this module.
 from __future__ import annotations
 
 import itertools
+import json
 import logging
 import os
 import subprocess
@@ -52,13 +53,16 @@ class So101RosEnv(gym.Env):
         timeout: float = 20.0,
         cameras: dict[str, tuple[int, int]] | None = None,
         dense_reward: bool = False,
+        servo_params: str = "sts3215",
+        randomize: str = "off",
     ):
         facts = task_facts(task)  # an unknown task is refused before anything starts
         import rclpy
         from geometry_msgs.msg import PoseStamped
         from rclpy.experimental import EventsExecutor
+        from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
         from sensor_msgs.msg import Image, JointState
-        from std_msgs.msg import Bool, Float64
+        from std_msgs.msg import Bool, Float64, String
         from std_srvs.srv import Trigger
 
         self.action_space = action_space()
@@ -72,6 +76,7 @@ class So101RosEnv(gym.Env):
         )
         self._terminates_on_success = facts.terminates_on_success
         self._dense_reward = dense_reward
+        self._servo_params, self._randomize = servo_params, randomize
         self._namespace = f"gym_{os.getpid()}_{uuid.uuid4().hex[:8]}"
         self._process: subprocess.Popen | None = None
         self._log = tempfile.NamedTemporaryFile(prefix="so101_gym_sim_", suffix=".log", delete=False)
@@ -101,6 +106,11 @@ class So101RosEnv(gym.Env):
         self._node.create_subscription(PoseStamped, f"{ns}/{contract.CUBE_POSE}", keep("cube"), 10)
         self._node.create_subscription(Float64, f"{ns}/{contract.TASK_REWARD}", keep("reward"), 10)
         self._node.create_subscription(Bool, f"{ns}/{contract.TASK_SUCCESS}", keep("success"), 10)
+        self._episode_settings: list[str] = []  # /sim/episode messages, latest last
+        latched = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL)
+        self._node.create_subscription(
+            String, f"{ns}/{contract.SIM_EPISODE}", lambda msg: self._episode_settings.append(msg.data), latched
+        )
         for name in self._cameras:
             self._node.create_subscription(Image, f"{ns}/{contract.camera_topic(name)}", keep(f"camera/{name}"), 10)
         self._commands = self._node.create_publisher(JointState, f"{ns}/{contract.JOINT_COMMANDS}", 10)
@@ -175,6 +185,10 @@ class So101RosEnv(gym.Env):
             str(self._rate),
             "--namespace",
             self._namespace,
+            "--servo-params",
+            self._servo_params,
+            "--randomize",
+            self._randomize,
         ]
         if self._lite:
             command.append("--lite")
@@ -232,14 +246,20 @@ class So101RosEnv(gym.Env):
     # ------------------------------------------------------------------ gymnasium
     def reset(self, *, seed: int | None = None, options: dict | None = None):
         super().reset(seed=seed)
+        settings_seen = len(self._episode_settings)
         if seed is not None or self._process is None:
             # A seed restarts the sim with it, so the same seed gives the same episodes.
+            self._episode_settings.clear()
+            settings_seen = 1  # the node's first message is of its start, before the reset
             counts = self._restart_and_reset(seed if seed is not None else 0)
         else:
             counts = dict(self._counts)
             self._call(self._reset_client, "/sim/reset")
         observation = self._observe(counts)
-        return observation, {"is_success": bool(self._latest["success"].data)}
+        # The node publishes the episode's settings before it answers the reset.
+        self._spin_until(lambda: len(self._episode_settings) > settings_seen, "/sim/episode")
+        settings = json.loads(self._episode_settings[-1])
+        return observation, {"is_success": bool(self._latest["success"].data), "episode_settings": settings}
 
     def step(self, action):
         # Not clamped here: the node clamps to the scene's joint limits, as in-process.

@@ -55,13 +55,23 @@ class So101LeRobotEnv(gym.Env):
         render_size: tuple[int, int] = (96, 128),
         render_mode: str = "rgb_array",
         backend: str = "inprocess",
+        servo_params: str = "sts3215",
+        randomize: str = "off",
     ):
         self._cameras = {name: tuple(size) for name, size in (cameras or {}).items()}
         self._environment_state = environment_state
         self._render_camera = render_camera
         sim_cameras = dict(self._cameras)
         sim_cameras.setdefault(render_camera, tuple(render_size))
-        self._sim = make_env(task, backend=backend, control_rate=float(fps), lite=lite, cameras=sim_cameras)
+        self._sim = make_env(
+            task,
+            backend=backend,
+            control_rate=float(fps),
+            lite=lite,
+            cameras=sim_cameras,
+            servo_params=servo_params,
+            randomize=randomize,
+        )
         self.metadata = {**self.metadata, "render_fps": fps}
         self.render_mode = render_mode
         self.task_description = self.task = task_description
@@ -85,6 +95,8 @@ class So101LeRobotEnv(gym.Env):
     def reset(self, *, seed: int | None = None, options: dict | None = None):
         super().reset(seed=seed)
         sim_observation, info = self._sim.reset(seed=seed)
+        # The episode's settings (nested JSON) stay out of the info LeRobot's vector envs stack.
+        info.pop("episode_settings", None)
         return self._convert(sim_observation), {**info, "is_success": bool(info["is_success"])}
 
     def step(self, action):

@@ -74,6 +74,8 @@ class So101SimEnvConfig(EnvConfig):
     backend: str = "inprocess"  # "inprocess" (so101_native) or "ros" (so101_sim_node in lockstep)
     render_camera: str = "top"  # the camera of lerobot-eval's videos (render())
     render_size: tuple[int, int] = (96, 128)  # its (height, width) unless it is one of `cameras`
+    servo_params: str = "sts3215"  # the sim's servo model: sts3215, gain80 or a so101-sysid fit file
+    randomize: str = "off"  # domain randomization: off, default (assets/randomization.toml) or a .toml
 
     def __post_init__(self):
         if self.backend not in ("inprocess", "ros"):
@@ -105,6 +107,8 @@ class So101SimEnvConfig(EnvConfig):
             "render_camera": self.render_camera,
             "render_size": tuple(self.render_size),
             "backend": self.backend,
+            "servo_params": self.servo_params,
+            "randomize": self.randomize,
         }
         if self.episode_length:
             kwargs["max_episode_steps"] = int(self.episode_length)
