@@ -158,6 +158,7 @@ pub fn python_module() -> String {
         ("CUSTOM_TASK", episode_bag::custom_data::TASK),
         ("CUSTOM_SUCCESS", episode_bag::custom_data::SUCCESS),
         ("CUSTOM_SEED", episode_bag::custom_data::SEED),
+        ("CUSTOM_SIMULATION", episode_bag::custom_data::SIMULATION),
     ];
     for (name, value) in layout {
         out += &format!("{name} = \"{value}\"\n");

@@ -14,6 +14,8 @@ so101-launch); a camera recorded both ways is read raw."""
 
 from __future__ import annotations
 
+import json
+import logging
 from collections.abc import Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -24,6 +26,8 @@ import yaml
 from . import contract
 from .commands import CommandError, obeyed_targets, targets_from_array, targets_from_joint_state
 from .messages import cube_pose_vector, image_size, joint_positions
+
+log = logging.getLogger(__name__)
 
 
 class BagError(Exception):
@@ -70,6 +74,9 @@ class Episode:
     # Command messages the nodes would have rejected (so101.commands), with the first reasons.
     rejected_commands: int = 0
     rejection_reasons: list[str] = field(default_factory=list)
+    # What the sim simulated the episode with (/sim/episode: servo model, randomization and its
+    # draw); None on the real arm or for a bag without it.
+    simulation: dict | None = None
 
 
 def _split_number(path: Path) -> int | None:
@@ -281,6 +288,7 @@ def read_episode(path: Path, cameras: list[str] | None) -> Episode:
         files=files,
         rejected_commands=len(reasons),
         rejection_reasons=reasons[:3],
+        simulation=simulation_settings(path, custom),
     )
 
 
@@ -321,3 +329,17 @@ def camera_frames(episode: Episode, plan: dict[str, list[FrameRef]]) -> Iterator
         if k == count:
             return
     raise BagError(f"{episode.path.name}: {count - k} planned camera frame(s) not found on the second read")
+
+
+def simulation_settings(path: Path, custom: dict) -> dict | None:
+    """The episode's custom_data `simulation` (JSON), or None when absent or unreadable (a
+    warning: the episode itself is still good)."""
+    text = str(custom.get(contract.CUSTOM_SIMULATION) or "")
+    if not text:
+        return None
+    try:
+        settings = json.loads(text)
+    except json.JSONDecodeError as error:
+        log.warning("%s: the simulation settings in metadata.yaml are not JSON (%s); left out", path.name, error)
+        return None
+    return settings if isinstance(settings, dict) else None

@@ -97,6 +97,7 @@ CUSTOM_EPISODE_INDEX = "episode_index"
 CUSTOM_TASK = "task"
 CUSTOM_SUCCESS = "success"
 CUSTOM_SEED = "seed"
+CUSTOM_SIMULATION = "simulation"
 
 
 def camera_topic(name: str, leaf: str = IMAGE_RAW) -> str:

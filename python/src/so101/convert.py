@@ -19,6 +19,7 @@ dataset frame at a time, so memory does not grow with an episode's length.
 from __future__ import annotations
 
 import argparse
+import json
 import logging
 import sys
 import time
@@ -268,6 +269,18 @@ def stamp_of(message) -> float:
     return message.header.stamp.sec + message.header.stamp.nanosec * 1e-9
 
 
+SIMULATION_FILE = "meta/so101_simulation.json"
+
+
+def write_simulation_settings(output: Path, episodes: list[dict]) -> None:
+    """meta/so101_simulation.json: per episode of the dataset, the servo model, randomization
+    ranges and draw its bag says the sim used (null for a real arm's), so a dataset says what it
+    was made on. LeRobot reads only its own meta files and leaves this one alone."""
+    if not any(entry["simulation"] for entry in episodes):
+        return
+    (output / SIMULATION_FILE).write_text(json.dumps({"episodes": episodes}, indent=1))
+
+
 def convert(args) -> int:
     from lerobot.datasets.lerobot_dataset import LeRobotDataset
     from tqdm import tqdm
@@ -281,6 +294,7 @@ def convert(args) -> int:
     converted, successful, skipped, frames_written = 0, 0, [], 0
     started = time.monotonic()
     notes: list[str] = []
+    simulation: list[dict] = []  # per dataset episode: what the sim simulated it with
     # None: decided by the first episode (a real arm records no /cube/pose: then none has it).
     environment_state: bool | None = False if args.no_environment_state else None
     for path in tqdm(paths, desc="episodes", unit="episode", disable=args.quiet):
@@ -372,12 +386,14 @@ def convert(args) -> int:
                 skipped.append(reason)
                 continue
             dataset.save_episode(parallel_encoding=not args.sequential_encoding)
+            simulation.append({"episode_index": converted, "bag": label, "simulation": episode.simulation})
             converted += 1
             successful += bool(frames.success[-1])  # the verdict of the episode (its last frame)
             frames_written += len(frames.state)
     check_status = 0
     if dataset is not None:
         dataset.finalize()
+        write_simulation_settings(Path(args.output), simulation)
     seconds = time.monotonic() - started
     summary = (
         f"{converted} episode(s) ({successful} successful), {frames_written} frames at {args.fps} fps -> {args.output} "

@@ -53,6 +53,15 @@ def add_parser(recipes, name: str) -> None:
         help="the sim's lite scene (no meshes), far faster to render on a CPU; a camera policy trained on it is "
         "evaluated on it too (so101-run-policy --lite, as the recipes do)",
     )
+    p.add_argument("--servo-params", default="sts3215", help="the sim's servo model: sts3215, gain80 or a so101-sysid fit file")
+    p.add_argument(
+        "--randomize",
+        nargs="?",
+        const="default",
+        default="off",
+        metavar="RANGES",
+        help="domain randomization of every episode: the default ranges (assets/randomization.toml) or a .toml",
+    )
     p.add_argument("--speed", type=float, default=None, help="sim speed (default 8 without cameras, else 4)")
     p.add_argument("--keep-failures", action="store_true", help="keep episodes the expert failed")
     p.add_argument("--repo-id", default=REPO_ID, help="the dataset's repo id")
@@ -76,7 +85,9 @@ def launch_command(args, output: Path) -> list[str]:
         f"--bags={output / 'bags'}",
         f"--log-dir={output / 'logs'}",
         f"--speed={speed:g}",
-        f"--sim-args=--cameras {shlex.quote(args.cameras)}" + (" --lite" if args.lite else ""),
+        f"--sim-args=--cameras {shlex.quote(args.cameras)}"
+        + (" --lite" if args.lite else "")
+        + f" --servo-params {shlex.quote(args.servo_params)} --randomize {shlex.quote(args.randomize)}",
         f"--teleop-args={teleop}",
     ]
 
