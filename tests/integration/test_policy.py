@@ -84,7 +84,7 @@ def test_a_tiny_act_trained_on_a_converted_dataset_runs_through_the_runner(
 
     checkpoint = train_tiny_act(dataset, tmp_path / "train")
 
-    # Evaluation: one seeded episode of 2 s on the runner's own sim in lockstep.
+    # Evaluation: one seeded episode of 2 s on the runner's own sim in lockstep, randomized.
     evaluation = tmp_path / "eval"
     done = run(
         [
@@ -97,6 +97,7 @@ def test_a_tiny_act_trained_on_a_converted_dataset_runs_through_the_runner(
             "--episode-time",
             "2",
             "--lite",
+            "--randomize",
             "--output",
             evaluation,
             "--quiet",
@@ -106,6 +107,9 @@ def test_a_tiny_act_trained_on_a_converted_dataset_runs_through_the_runner(
     assert done.returncode == 0, done.stdout[-3000:] + done.stderr[-3000:]
     info = json.loads((evaluation / "eval_info.json").read_text())
     assert info["aggregated"]["episodes"] == 1 and info["aggregated"]["pc_success"] in (0.0, 100.0)
+    assert info["aggregated"]["randomize"] == "default" and info["aggregated"]["servo_params"] == "sts3215"
+    # The episode ran on a randomized world: the runner reports the draw the sim published.
+    assert info["per_episode"][0]["settings"]["draw"]["seed"] > 0, info["per_episode"][0]
     episode = info["per_episode"][0]
     assert episode["seed"] == 7 and episode["steps"] == 60, episode  # 2 s at 30 fps, unless it succeeded: it cannot
     assert math.isfinite(episode["sum_reward"]) and episode["max_reward"] >= 0.0

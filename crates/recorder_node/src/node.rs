@@ -534,11 +534,6 @@ impl Control {
         while let Ok(Some((message, _))) = self.task_success.take() {
             self.last_task_success = Some(message.data);
         }
-        while let Ok(Some((message, _))) = self.simulation.take() {
-            if commands.send(Command::Simulation(message.data)).is_err() {
-                tracing::error!("the writer thread is gone: the simulation's settings were lost");
-            }
-        }
         while let Ok(Some((message, _))) = self.events.take() {
             match parse_event(&message.data) {
                 Ok(event) => self.apply(event, commands, None),
@@ -547,6 +542,13 @@ impl Control {
                         tracing::warn!(suppressed, "episode event ignored: {error}");
                     }
                 }
+            }
+        }
+        // After the events: a reset's settings come after the event that closed the episode before
+        // it (teleop marks the end, then resets), and belong to the next one.
+        while let Ok(Some((message, _))) = self.simulation.take() {
+            if commands.send(Command::Simulation(message.data)).is_err() {
+                tracing::error!("the writer thread is gone: the simulation's settings were lost");
             }
         }
         // Calls on different services carry no common order; this one makes "mark, then stop"

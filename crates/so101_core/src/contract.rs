@@ -109,7 +109,11 @@ pub fn python_module() -> String {
         out += &format!("    ({:?}, {:?}),\n", limit.min, limit.max);
     }
     out += ")\n";
-    out += &format!("CAMERA_NAMES = ({})\n\n", quoted(&CAMERA_NAMES));
+    out += &format!("CAMERA_NAMES = ({})\n", quoted(&CAMERA_NAMES));
+    out += &format!(
+        "# The STS3215's magnetic encoder: ticks per revolution.\nENCODER_TICKS_PER_REVOLUTION = {}\n\n",
+        crate::servo::params::TICKS_PER_REVOLUTION as u32
+    );
     out += &tasks_python();
     out += "# Topics, services and actions, relative to the namespace.\n";
     let constants: &[(&str, &str)] = &[

@@ -59,7 +59,15 @@ impl WorldBatch {
         if num_worlds == 0 {
             return Err(PyValueError::new_err("a batch needs at least one world"));
         }
-        let spec = WorldSpec::new(scene, lite, task, control_rate, dense_reward, servo_params, randomize)?;
+        let spec = WorldSpec::new(
+            scene,
+            lite,
+            task,
+            control_rate,
+            dense_reward,
+            servo_params,
+            randomize,
+        )?;
         let envs = (0..num_worlds as u64)
             .map(|index| spec.build(seed.wrapping_add(index)))
             .collect::<PyResult<Vec<_>>>()?;

@@ -6,6 +6,7 @@
 mod batch;
 mod cameras;
 mod expert;
+mod sysid;
 mod world;
 
 use pyo3::prelude::*;
@@ -19,6 +20,10 @@ fn so101_native(module: &Bound<'_, PyModule>) -> PyResult<()> {
     module.add("SETTLE_SECONDS", so101_sim::env::SETTLE_SECONDS)?;
     module.add_function(wrap_pyfunction!(mujoco_version, module)?)?;
     module.add_function(wrap_pyfunction!(scene_xml, module)?)?;
+    module.add_function(wrap_pyfunction!(sysid::servo_params_json, module)?)?;
+    module.add_function(wrap_pyfunction!(sysid::fit_servos, module)?)?;
+    module.add_function(wrap_pyfunction!(sysid::grasp_positions, module)?)?;
+    module.add_function(wrap_pyfunction!(sysid::replay_servo_joint, module)?)?;
     Ok(())
 }
 

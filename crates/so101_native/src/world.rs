@@ -79,7 +79,7 @@ impl WorldSpec {
             seed,
             self.options.clone(),
         )
-            .map_err(|error| PyValueError::new_err(error.to_string()))
+        .map_err(|error| PyValueError::new_err(error.to_string()))
     }
 }
 
@@ -145,7 +145,15 @@ impl World {
         servo_params: &str,
         randomize: &str,
     ) -> PyResult<Self> {
-        let spec = WorldSpec::new(scene, lite, task, control_rate, dense_reward, servo_params, randomize)?;
+        let spec = WorldSpec::new(
+            scene,
+            lite,
+            task,
+            control_rate,
+            dense_reward,
+            servo_params,
+            randomize,
+        )?;
         Ok(Self {
             inner: Mutex::new(WorldState {
                 env: spec.build(seed)?,
@@ -195,10 +203,24 @@ impl World {
         self.state().env.world().time()
     }
 
+    /// Physics steps since the world was made (settling after resets included).
+    #[getter]
+    fn physics_steps(&mut self) -> u64 {
+        self.state().env.world().total_steps()
+    }
+
     /// Physics divergences so far (MuJoCo reset its state; the episode restarted from its start).
     #[getter]
     fn divergences(&mut self) -> u64 {
         self.state().env.divergences
+    }
+
+    /// Puts the arm at rest at these joint positions (6, rad; clamped to the limits), the servos
+    /// holding them: a replay starting where a recording started.
+    fn place_arm(&mut self, positions: PyReadonlyArray1<f64>) -> PyResult<()> {
+        let targets = joint_targets(positions.as_slice()?)?;
+        self.state().env.world_mut().place_arm(&targets);
+        Ok(())
     }
 
     /// JSON: the servo model and its parameters, the randomization ranges and the current

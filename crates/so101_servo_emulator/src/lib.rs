@@ -5,6 +5,7 @@
 //! this library (a dev-dependency: the driver itself depends on nothing here).
 //!
 //! - `servo`: one servo's control table and shaft physics (pure).
+//! - `dynamics`: the shaft moved by the STS3215 model of so101_core::servo (pure).
 //! - `bus`: the servos on one bus, instruction semantics, faults and wire timing (pure).
 //! - `control`: the runtime control commands (`move 1 2048`, `drop 0.1`, `dump`, ...) (pure).
 //! - `in_process`: the bus as an in-process transport (the driver's `Connector`), for the driver's
@@ -13,6 +14,7 @@
 
 pub mod bus;
 pub mod control;
+pub mod dynamics;
 pub mod in_process;
 pub mod pty;
 pub mod servo;

@@ -15,7 +15,10 @@ use std::{
 
 use anyhow::{bail, Context};
 use clap::{Parser, ValueEnum};
-use so101_core::ros::{logging, shutdown::Shutdown};
+use so101_core::{
+    ros::{logging, shutdown::Shutdown},
+    servo::{ArmServoParams, ServoModelChoice},
+};
 use so101_feetech_driver::calibration::ArmCalibration;
 use so101_servo_emulator::{ControlCommand, Emulator, EmulatorConfig, Timing};
 
@@ -88,6 +91,20 @@ struct Cli {
     /// Every servo's initial Return_Delay_Time register (units of 2 us; factory 250).
     #[arg(long)]
     return_delay: Option<u8>,
+    /// Move the shafts as the STS3215 model: "sts3215" (published mechanics) or a parameter
+    /// file (.json, `so101-sysid fit`'s); the registers the driver writes shape the motion, the
+    /// file's dead zones become the servos' own. Without it: the first-order approach of --tau-ms.
+    #[arg(long, value_parser = parse_servo_params)]
+    servo_params: Option<ArmServoParams>,
+}
+
+fn parse_servo_params(text: &str) -> Result<ArmServoParams, String> {
+    match ServoModelChoice::parse(text).map_err(|error| error.to_string())? {
+        ServoModelChoice::Sts3215(params) => Ok(*params),
+        ServoModelChoice::Gain80 => {
+            Err("gain80 is the simulation's position actuator, not a servo model: use sts3215 or a file".into())
+        }
+    }
 }
 
 impl Cli {
@@ -127,6 +144,7 @@ impl Cli {
             link: self.link.clone(),
             seed: self.seed,
             return_delay: self.return_delay,
+            servo_params: self.servo_params,
         })
     }
 }

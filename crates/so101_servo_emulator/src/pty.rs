@@ -21,6 +21,10 @@ use nix::{
     sys::termios::{cfmakeraw, tcgetattr, tcsetattr, SetArg, Termios},
 };
 use serde::Serialize;
+use so101_core::{
+    robot::JOINT_COUNT,
+    servo::{ArmServoParams, ARM_LOADS},
+};
 
 use so101_feetech_driver::{
     calibration::ArmCalibration,
@@ -63,6 +67,10 @@ pub struct EmulatorConfig {
     pub seed: u64,
     /// Overrides every servo's initial Return_Delay_Time (units of 2 us).
     pub return_delay: Option<u8>,
+    /// The shafts move as the STS3215 model with these parameters (slot i drives joint i of the
+    /// arm, its mechanics and load; the dead zones become the servos' CW/CCW_Dead_Zone) instead
+    /// of the first-order approach of `tau`.
+    pub servo_params: Option<ArmServoParams>,
 }
 
 impl Default for EmulatorConfig {
@@ -77,6 +85,7 @@ impl Default for EmulatorConfig {
             link: None,
             seed: 0,
             return_delay: None,
+            servo_params: None,
         }
     }
 }
@@ -307,6 +316,18 @@ fn build_bus(config: &EmulatorConfig) -> Result<BusEmulator, EmulatorError> {
         .enumerate()
         .map(|(index, mut servo)| {
             servo.set_tau(config.tau);
+            if let Some(params) = &config.servo_params {
+                let joint = index % JOINT_COUNT;
+                let servo_params = params.0[joint];
+                for (register, value) in [
+                    (reg::CW_DEAD_ZONE, servo_params.registers.cw_dead_zone),
+                    (reg::CCW_DEAD_ZONE, servo_params.registers.ccw_dead_zone),
+                ] {
+                    // Checked when the file was read: a small whole number of ticks.
+                    let _ = servo.set_factory_register(register, value.round() as i32);
+                }
+                servo.set_dynamics(servo_params.mechanics, ARM_LOADS[joint]);
+            }
             let plugged = match &config.plugged {
                 Some(plugged) => plugged.get(index).copied().unwrap_or(false),
                 None => true,

@@ -1,7 +1,10 @@
-//! One emulated STS3215: its 256-byte control table and a first-order model of the shaft.
+//! One emulated STS3215: its 256-byte control table and a model of the shaft.
 //!
-//! Only position mode is modelled: the shaft approaches the goal exponentially with time constant
-//! `tau`; Acceleration, Goal_Time and Goal_Velocity are stored but do not shape the motion.
+//! Only position mode is modelled. By default the shaft approaches the goal exponentially with
+//! time constant `tau`; Acceleration, Goal_Time and Goal_Velocity are stored but do not shape the
+//! motion. With [`ServoModel::set_dynamics`] it moves as the STS3215 model of so101_core::servo
+//! says, from the registers in its table (P/D/I, Acceleration, Goal_Velocity, Torque_Limit, the
+//! dead zones, the overload settings) and the given mechanics and load ([`crate::dynamics`]).
 //!
 //! Positions, as the servo has them: the magnetic encoder reads the shaft in 0..=4095 (a hand
 //! turning it past the seam wraps it); Present_Position = encoder - Homing_Offset, NOT wrapped, so
@@ -23,6 +26,9 @@
 
 use std::time::Duration;
 
+use crate::dynamics::ShaftDynamics;
+
+use so101_core::servo::{JointLoad, ServoMechanics, ServoRegisters};
 use so101_feetech_driver::{
     calibration::MotorCalibration,
     protocol::{
@@ -88,6 +94,8 @@ pub struct ServoModel {
     overloaded_for: f64,
     /// The overload protection tripped: error bit 0x20 until torque is enabled again.
     overload_tripped: bool,
+    /// The STS3215 model moving the shaft instead of the first-order approach.
+    dynamics: Option<ShaftDynamics>,
 }
 
 impl ServoModel {
@@ -106,6 +114,7 @@ impl ServoModel {
             stalled: false,
             overloaded_for: 0.0,
             overload_tripped: false,
+            dynamics: None,
         };
         let defaults = [
             (reg::MODEL_NUMBER, i32::from(STS3215_MODEL)),
@@ -199,6 +208,56 @@ impl ServoModel {
         self.tau = tau;
     }
 
+    /// From now on the shaft moves as the STS3215 model with these mechanics, driving `load`.
+    pub fn set_dynamics(&mut self, mechanics: ServoMechanics, load: JointLoad) {
+        let mut dynamics = ShaftDynamics::new(mechanics, load);
+        dynamics.place(self.actual, self.joint_zero());
+        self.dynamics = Some(dynamics);
+    }
+
+    /// Sets an EPROM register in the live table and the flash, as the factory (or a past session)
+    /// left it.
+    pub fn set_factory_register(
+        &mut self,
+        register: Register,
+        value: i32,
+    ) -> Result<(), RegisterError> {
+        self.set_register(register, value)?;
+        let start = usize::from(register.address);
+        let end = (start + usize::from(register.size)).min(EPROM_LEN);
+        if start < end {
+            self.flash[start..end].copy_from_slice(&self.table[start..end]);
+        }
+        Ok(())
+    }
+
+    /// The register values the STS3215 model reads, from the live table.
+    pub fn model_registers(&self) -> ServoRegisters {
+        let value = |register| f64::from(self.register(register));
+        ServoRegisters {
+            p_coefficient: value(reg::P_COEFFICIENT),
+            d_coefficient: value(reg::D_COEFFICIENT),
+            i_coefficient: value(reg::I_COEFFICIENT),
+            acceleration: value(reg::ACCELERATION),
+            goal_velocity: value(reg::GOAL_VELOCITY).abs(),
+            torque_limit: value(reg::TORQUE_LIMIT),
+            cw_dead_zone: value(reg::CW_DEAD_ZONE),
+            ccw_dead_zone: value(reg::CCW_DEAD_ZONE),
+            overload_torque: value(reg::OVERLOAD_TORQUE),
+            protection_time: value(reg::PROTECTION_TIME),
+            protective_torque: value(reg::PROTECTIVE_TORQUE),
+        }
+    }
+
+    /// Where the joint's zero is, in encoder ticks: the middle of the position limits (the
+    /// calibrated range) plus Homing_Offset, as the driver maps ticks to radians.
+    fn joint_zero(&self) -> f64 {
+        let mid = f64::from(
+            self.register(reg::MIN_POSITION_LIMIT) + self.register(reg::MAX_POSITION_LIMIT),
+        ) / 2.0;
+        mid + f64::from(self.register(reg::HOMING_OFFSET))
+    }
+
     /// The id the servo answers to (register ID, changed by writes).
     pub fn id(&self) -> u8 {
         self.table[usize::from(reg::ID.address)]
@@ -288,6 +347,10 @@ impl ServoModel {
     pub fn set_actual(&mut self, ticks: f64) {
         if ticks.is_finite() {
             self.actual = ticks.rem_euclid(TICKS);
+            let zero = self.joint_zero();
+            if let Some(dynamics) = &mut self.dynamics {
+                dynamics.place(self.actual, zero);
+            }
             self.refresh_registers();
         }
     }
@@ -433,9 +496,16 @@ impl ServoModel {
         }
     }
 
-    /// Present_Load (0.1 % of full torque): proportional to the position error, saturating.
+    /// Present_Load (0.1 % of full torque): the model's demand, or (first-order shaft, or a
+    /// blocked one) proportional to the position error; saturating.
     fn load(&self) -> f64 {
-        (self.position_error() * LOAD_PER_TICK).clamp(-MAX_LOAD, MAX_LOAD)
+        let load = match &self.dynamics {
+            Some(dynamics) if self.torque_on() && !self.stalled => {
+                dynamics.demand_fraction() * MAX_LOAD
+            }
+            _ => self.position_error() * LOAD_PER_TICK,
+        };
+        load.clamp(-MAX_LOAD, MAX_LOAD)
     }
 
     fn load_above_overload_torque(&self) -> bool {
@@ -452,6 +522,16 @@ impl ServoModel {
         if self.stalled {
             return;
         }
+        if self.dynamics.is_some() {
+            let (registers, zero, target) =
+                (self.model_registers(), self.joint_zero(), self.target());
+            if let Some(dynamics) = &mut self.dynamics {
+                // The motor never drives the shaft across the encoder's seam.
+                let moved = dynamics.advance(registers, zero, target, seconds, true);
+                self.actual = moved.clamp(0.0, f64::from(MAX_ENCODER));
+            }
+            return;
+        }
         let tau = self.tau.as_secs_f64().max(1e-6);
         self.actual += self.position_error() * (1.0 - (-seconds / tau).exp());
     }
@@ -459,6 +539,10 @@ impl ServoModel {
     fn hold_position(&mut self) {
         let _ = self.set_register(reg::GOAL_POSITION, self.present());
         self.holding = true;
+        let zero = self.joint_zero();
+        if let Some(dynamics) = &mut self.dynamics {
+            dynamics.place(self.actual, zero);
+        }
     }
 
     fn refresh_registers(&mut self) {

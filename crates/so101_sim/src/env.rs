@@ -238,11 +238,11 @@ impl TaskEnv {
         let mut cube = self.world.cube_pose();
         if let Some(randomized) = &self.randomized {
             let (joints, position) = randomized.current;
-            for joint in 0..JOINT_COUNT {
-                arm.position[joint] += joints[joint];
+            for (value, noise) in arm.position.iter_mut().zip(joints) {
+                *value += noise;
             }
-            for axis in 0..3 {
-                cube.position[axis] += position[axis];
+            for (value, noise) in cube.position.iter_mut().zip(position) {
+                *value += noise;
             }
         }
         Observation {

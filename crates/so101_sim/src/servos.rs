@@ -65,8 +65,8 @@ impl ArmServos {
     /// The targets of a control period sent at episode time `time`.
     pub fn command(&mut self, time: f64, targets: &JointPositions) {
         if let ServoModelChoice::Sts3215(params) = &self.choice {
-            for joint in 0..JOINT_COUNT {
-                self.states[joint].command(&params.0[joint], time, targets[joint]);
+            for ((state, servo), target) in self.states.iter_mut().zip(&params.0).zip(targets) {
+                state.command(servo, time, *target);
             }
         }
     }

@@ -196,7 +196,7 @@ impl World {
     pub fn set_servo_params(&mut self, params: ArmServoParams) {
         if self.servos.params().is_some() {
             self.servos = ArmServos::install(
-                ServoModelChoice::Sts3215(params),
+                ServoModelChoice::Sts3215(Box::new(params)),
                 &mut self.sim,
                 &self.ids.actuator,
                 &self.ids.joint_dof,
@@ -267,6 +267,23 @@ impl World {
         self.sim.forward();
     }
 
+    /// Puts the arm at `positions` at rest, the servos holding them (a replay starting where a
+    /// recording did). Positions outside the limits are clamped.
+    pub fn place_arm(&mut self, positions: &JointPositions) {
+        let mut placed = *positions;
+        for (joint, position) in placed.iter_mut().enumerate() {
+            *position = self.limits[joint].clamp(*position);
+        }
+        for (joint, position) in placed.iter().enumerate() {
+            self.sim.qpos_mut()[self.ids.joint_qpos[joint]] = *position;
+            self.sim.qvel_mut()[self.ids.joint_dof[joint]] = 0.0;
+        }
+        self.targets = placed;
+        self.servos.hold(&placed);
+        self.write_controls();
+        self.sim.forward();
+    }
+
     /// Lets the physics run `seconds` (whole physics steps) with the current targets, before the
     /// episode's first control period: the control periods that follow keep their length.
     pub fn settle(&mut self, seconds: f64) {
@@ -325,9 +342,13 @@ impl World {
     fn write_servo_torques(&mut self) {
         let time = self.episode_steps as f64 * self.timestep;
         let arm = self.arm_state();
-        let torques =
-            self.servos
-                .controls(time, &self.targets, &arm.position, &arm.velocity, self.timestep);
+        let torques = self.servos.controls(
+            time,
+            &self.targets,
+            &arm.position,
+            &arm.velocity,
+            self.timestep,
+        );
         self.write_ctrl(torques);
     }
 

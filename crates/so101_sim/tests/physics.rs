@@ -203,7 +203,10 @@ fn the_emulators_joint_loads_are_the_scenes_at_home() {
     let mut scene_loads = Vec::new();
     for joint in 0..JOINT_COUNT {
         let id = sim
-            .id(so101_sim::mujoco::ObjectKind::Joint, so101_core::robot::JOINT_NAMES[joint])
+            .id(
+                so101_sim::mujoco::ObjectKind::Joint,
+                so101_core::robot::JOINT_NAMES[joint],
+            )
             .expect("every joint is in the scene");
         let dof = sim.joint_dof_address(id);
         let (_, _, armature) = sim.dof_friction(dof);

@@ -8,6 +8,7 @@ use std::{
 
 use anyhow::{Context, Result};
 use ros2_client::Publisher;
+use so101_core::servo::ServoModelChoice;
 use so101_core::{
     contract::topics,
     ros::{
@@ -15,7 +16,6 @@ use so101_core::{
         qos, shutdown::Shutdown, RosNode,
     },
 };
-use so101_core::servo::ServoModelChoice;
 use so101_msgs::std_msgs::String as StringMessage;
 
 use so101_sim::{
@@ -304,7 +304,10 @@ impl SimLoop {
 
     fn publish_episode_settings(&self) {
         let settings = so101_sim::provenance::episode_settings(&self.env).to_string();
-        if let Err(error) = self.episode_settings.publish(StringMessage { data: settings }) {
+        if let Err(error) = self
+            .episode_settings
+            .publish(StringMessage { data: settings })
+        {
             tracing::warn!("cannot publish /sim/episode: {error:?}");
         }
     }

@@ -14,6 +14,8 @@ JOINT_LIMITS = (
     (-0.1745, 1.7453),
 )
 CAMERA_NAMES = ("top", "front", "wrist")
+# The STS3215's magnetic encoder: ticks per revolution.
+ENCODER_TICKS_PER_REVOLUTION = 4096
 
 # The control rate of the arm, the dataset and every task (Hz).
 CONTROL_RATE = 30.0

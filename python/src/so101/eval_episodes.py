@@ -25,6 +25,8 @@ class EpisodeResult:
     max_reward: float
     steps: int
     video: str | None
+    # What the sim simulated the episode with (its servo model and randomization draw), if known.
+    settings: dict | None = None
 
 
 # A video frame is at least this tall: a policy's 72-pixel camera is a smudge on a screen.
@@ -68,8 +70,11 @@ def run_episodes(
         (output / "videos").mkdir(parents=True, exist_ok=True)
     results: list[EpisodeResult] = []
     for index, seed in enumerate(tqdm(seeds, desc="episodes", unit="ep", disable=quiet), start=first_index):
-        observation, _ = env.reset(seed=seed)
+        observation, reset_info = env.reset(seed=seed)
         reset(observation)
+        settings = reset_info.get("episode_settings")
+        if settings is not None:
+            settings = {"servo_model": settings.get("servo_model"), "draw": settings.get("draw")}
         rewards: list[float] = []
         video: list[np.ndarray] = []
         success = False
@@ -87,7 +92,13 @@ def run_episodes(
             write_video(path, video, fps=int(round(fps)))
         results.append(
             EpisodeResult(
-                seed, success, float(np.sum(rewards)), float(np.max(rewards)), len(rewards), str(path) if path else None
+                seed,
+                success,
+                float(np.sum(rewards)),
+                float(np.max(rewards)),
+                len(rewards),
+                str(path) if path else None,
+                settings,
             )
         )
     return results

@@ -3,6 +3,7 @@
 //! gives each number's source). The simulation's actuators, the servo-bus emulator and the
 //! identification (`so101-sysid`) all use it.
 
+pub mod identify;
 pub mod model;
 pub mod params;
 pub mod plant;

@@ -120,9 +120,8 @@ impl ServoState {
         let protecting = self.watch_overload(params, demand, dt);
         let mut ceiling = params.torque_ceiling();
         if protecting {
-            ceiling = ceiling.min(
-                params.mechanics.stall_torque * params.registers.protective_torque / 100.0,
-            );
+            ceiling = ceiling
+                .min(params.mechanics.stall_torque * params.registers.protective_torque / 100.0);
         }
         let torque = demand.clamp(-ceiling, ceiling);
         let torque = limit_by_speed(torque, velocity, params.mechanics.no_load_speed);
@@ -241,7 +240,10 @@ mod tests {
         assert_eq!(state.reference, 1.0);
         assert!(peak <= params.speed_limit() + 1e-9);
         // 254 x 100 ticks/s² = 39 rad/s²: a 1 rad move peaks at sqrt(39) = 6.2 rad/s.
-        assert!((peak - (params.acceleration_limit() * 1.0).sqrt()).abs() < 0.1, "{peak}");
+        assert!(
+            (peak - (params.acceleration_limit() * 1.0).sqrt()).abs() < 0.1,
+            "{peak}"
+        );
     }
 
     #[test]
@@ -275,7 +277,10 @@ mod tests {
         // Moving inside it, the shorted windings brake: stall torque / no-load speed.
         let braking = state.step(&params, 0.0, -2.5 * RAD_PER_TICK, 0.5, 0.001);
         let back_emf = params.mechanics.stall_torque / params.mechanics.no_load_speed;
-        assert!((braking.torque + back_emf * 0.5).abs() < 1e-12, "{braking:?}");
+        assert!(
+            (braking.torque + back_emf * 0.5).abs() < 1e-12,
+            "{braking:?}"
+        );
         let outside = state.step(&params, 0.0, -3.5 * RAD_PER_TICK, 0.0, 0.001);
         // Measured from the dead zone's edge: 0.5 tick of error.
         assert!((outside.torque - params.kp() * 0.5 * RAD_PER_TICK).abs() < 1e-9);

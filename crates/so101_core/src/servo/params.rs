@@ -295,17 +295,16 @@ impl ArmServoParams {
             })?;
         let mut params = Self::sts3215();
         for (name, joint) in file.joints {
-            let index = crate::robot::joint_index(&name).ok_or_else(|| ServoParamsError::Parse {
-                path: String::new(),
-                source: serde::de::Error::custom(format!("{name:?} is not an SO-101 joint")),
-            })?;
-            let base = params.0[index];
-            params.0[index] = joint
-                .over(base)
-                .map_err(|source| ServoParamsError::Parse {
+            let index =
+                crate::robot::joint_index(&name).ok_or_else(|| ServoParamsError::Parse {
                     path: String::new(),
-                    source,
+                    source: serde::de::Error::custom(format!("{name:?} is not an SO-101 joint")),
                 })?;
+            let base = params.0[index];
+            params.0[index] = joint.over(base).map_err(|source| ServoParamsError::Parse {
+                path: String::new(),
+                source,
+            })?;
         }
         for (index, joint) in params.0.iter().enumerate() {
             joint.check(JOINT_NAMES[index])?;
@@ -324,19 +323,19 @@ impl ArmServoParams {
 }
 
 /// The servo model of the simulation's actuators.
-#[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(Debug, Clone, PartialEq)]
 pub enum ServoModelChoice {
     /// The scene's own position actuator: gain 80 N m/rad, damping 3, ±3.35 N m; instant, no
     /// registers. The default before the STS3215 model, kept for comparison.
     Gain80,
-    /// The STS3215 model with these parameters.
-    Sts3215(ArmServoParams),
+    /// The STS3215 model with these parameters (boxed: six servos' worth of numbers).
+    Sts3215(Box<ArmServoParams>),
 }
 
 impl Default for ServoModelChoice {
     /// The STS3215 model with its published parameters.
     fn default() -> Self {
-        Self::Sts3215(ArmServoParams::sts3215())
+        Self::Sts3215(Box::new(ArmServoParams::sts3215()))
     }
 }
 
@@ -352,8 +351,10 @@ impl ServoModelChoice {
     pub fn parse(text: &str) -> Result<Self, ServoParamsError> {
         match text {
             "gain80" => Ok(Self::Gain80),
-            "sts3215" => Ok(Self::Sts3215(ArmServoParams::sts3215())),
-            path if path.ends_with(".json") => ArmServoParams::load(Path::new(path)).map(Self::Sts3215),
+            "sts3215" => Ok(Self::Sts3215(Box::new(ArmServoParams::sts3215()))),
+            path if path.ends_with(".json") => {
+                ArmServoParams::load(Path::new(path)).map(|params| Self::Sts3215(Box::new(params)))
+            }
             other => Err(ServoParamsError::Model(other.to_owned())),
         }
     }
@@ -403,7 +404,8 @@ impl JointEntry {
 
     /// The preset's values with this entry's fields over them (unknown names are an error).
     fn over(self, base: ServoParams) -> Result<ServoParams, serde_json::Error> {
-        let merge = |base: serde_json::Value, fields: serde_json::Map<String, serde_json::Value>| {
+        let merge = |base: serde_json::Value,
+                     fields: serde_json::Map<String, serde_json::Value>| {
             let mut map = match base {
                 serde_json::Value::Object(map) => map,
                 _ => serde_json::Map::new(),

@@ -166,7 +166,11 @@ mod tests {
         plant.command(0.3);
         plant.advance(1.0, true);
         let (below, above) = params.dead_zone();
-        assert!((plant.position - 0.3).abs() <= below.max(above) + 1e-3, "{}", plant.position);
+        assert!(
+            (plant.position - 0.3).abs() <= below.max(above) + 1e-3,
+            "{}",
+            plant.position
+        );
         assert!(plant.velocity.abs() < 1e-3);
     }
 
@@ -196,7 +200,13 @@ mod tests {
     #[test]
     fn replay_samples_the_motion_at_the_given_times() {
         let params = ServoParams::default();
-        let positions = replay(params, ARM_LOADS[0], 0.0, &[(0.1, 0.5)], &[0.05, 0.1, 0.5, 1.0]);
+        let positions = replay(
+            params,
+            ARM_LOADS[0],
+            0.0,
+            &[(0.1, 0.5)],
+            &[0.05, 0.1, 0.5, 1.0],
+        );
         assert_eq!(positions[0], 0.0);
         assert!(positions[2] > 0.3);
         assert!((positions[3] - 0.5).abs() < 3e-3);

@@ -205,7 +205,9 @@ impl Driver {
         let output = self.controller.cycle(now);
         self.keep_last_words_line();
         if let Some(positions) = &output.positions {
-            self.publish_joints(positions, &output);
+            // Stamped when the cycle began, right before the positions were read: the instant
+            // they describe (the publish comes after the bus's read and write).
+            self.publish_joints(positions, &output, Time::from_secs_f64(clock));
             if let Some(arm) = self.arm.as_mut() {
                 arm.after_period(clock, positions, &output.velocities);
             }
@@ -315,10 +317,10 @@ impl Driver {
         }
     }
 
-    fn publish_joints(&mut self, positions: &[f64], output: &CycleOutput) {
+    fn publish_joints(&mut self, positions: &[f64], output: &CycleOutput, stamp: Time) {
         self.outputs.send(Output::Joints(JointState {
             header: Header {
-                stamp: Time::now(),
+                stamp,
                 frame_id: String::new(),
             },
             name: so101_core::robot::JOINT_NAMES

@@ -10,13 +10,15 @@ impl Simulation {
     pub fn set_actuator_direct(&mut self, actuator: usize) {
         let nu = self.model().nu as usize;
         let gain = self.model_slice_mut(self.model().actuator_gainprm, nu * ffi::mjNGAIN as usize);
-        let row = &mut gain[actuator * ffi::mjNGAIN as usize..(actuator + 1) * ffi::mjNGAIN as usize];
+        let row =
+            &mut gain[actuator * ffi::mjNGAIN as usize..(actuator + 1) * ffi::mjNGAIN as usize];
         row.fill(0.0);
         row[0] = 1.0;
         let bias = self.model_slice_mut(self.model().actuator_biasprm, nu * ffi::mjNBIAS as usize);
         bias[actuator * ffi::mjNBIAS as usize..(actuator + 1) * ffi::mjNBIAS as usize].fill(0.0);
         // SAFETY: MuJoCo allocated nu bytes here for the life of the model; `&mut self` is exclusive.
-        let limited = unsafe { std::slice::from_raw_parts_mut(self.model().actuator_ctrllimited, nu) };
+        let limited =
+            unsafe { std::slice::from_raw_parts_mut(self.model().actuator_ctrllimited, nu) };
         limited[actuator] = 0;
     }
 
@@ -78,7 +80,11 @@ impl Simulation {
         let inertia = self.model_slice(self.model().body_inertia, 3 * nbody);
         (
             self.model_slice(self.model().body_mass, nbody)[body],
-            [inertia[3 * body], inertia[3 * body + 1], inertia[3 * body + 2]],
+            [
+                inertia[3 * body],
+                inertia[3 * body + 1],
+                inertia[3 * body + 2],
+            ],
         )
     }
 
@@ -92,7 +98,12 @@ impl Simulation {
     /// A material's colour (r, g, b, a).
     pub fn material_rgba(&self, material: usize) -> [f32; 4] {
         let all = self.model_f32(self.model().mat_rgba, 4 * self.model().nmat as usize);
-        [all[4 * material], all[4 * material + 1], all[4 * material + 2], all[4 * material + 3]]
+        [
+            all[4 * material],
+            all[4 * material + 1],
+            all[4 * material + 2],
+            all[4 * material + 3],
+        ]
     }
 
     pub fn set_material_rgba(&mut self, material: usize, rgba: [f32; 4]) {
@@ -113,7 +124,11 @@ impl Simulation {
         let diffuse = self.model_f32(self.model().light_diffuse, 3 * nlight);
         (
             [dir[3 * light], dir[3 * light + 1], dir[3 * light + 2]],
-            [diffuse[3 * light], diffuse[3 * light + 1], diffuse[3 * light + 2]],
+            [
+                diffuse[3 * light],
+                diffuse[3 * light + 1],
+                diffuse[3 * light + 2],
+            ],
         )
     }
 

@@ -84,7 +84,8 @@ impl SceneLook {
             }
         }
         for ((id, direction, diffuse), light) in self.lights.iter().zip(&draw.lights) {
-            let moved: [f64; 3] = std::array::from_fn(|axis| direction[axis] + light.direction_offset[axis]);
+            let moved: [f64; 3] =
+                std::array::from_fn(|axis| direction[axis] + light.direction_offset[axis]);
             let norm = moved.iter().map(|value| value * value).sum::<f64>().sqrt();
             let direction = if norm > 1e-6 {
                 moved.map(|value| value / norm)

@@ -135,7 +135,11 @@ impl RandomizationConfig {
             ("cube.size_scale", self.cube.size_scale, true),
             ("cube.mass_scale", self.cube.mass_scale, true),
             ("cube.friction_scale", self.cube.friction_scale, true),
-            ("lighting.intensity_scale", self.lighting.intensity_scale, false),
+            (
+                "lighting.intensity_scale",
+                self.lighting.intensity_scale,
+                false,
+            ),
             ("lighting.ambient", self.lighting.ambient, false),
             ("servos.gain_scale", self.servos.gain_scale, true),
             ("servos.damping_scale", self.servos.damping_scale, false),
@@ -163,7 +167,10 @@ impl RandomizationConfig {
             ("cameras.position_jitter", self.cameras.position_jitter),
             ("cameras.fovy_jitter", self.cameras.fovy_jitter),
             ("observation.joint_noise", self.observation.joint_noise),
-            ("observation.cube_position_noise", self.observation.cube_position_noise),
+            (
+                "observation.cube_position_noise",
+                self.observation.cube_position_noise,
+            ),
         ];
         for (name, value) in amounts {
             if !(value.is_finite() && value >= 0.0) {
@@ -183,7 +190,10 @@ mod tests {
         let config =
             RandomizationConfig::from_toml("[cube]\nmass_scale = [1.0, 2.0]\n", "test").unwrap();
         assert_eq!(config.cube.mass_scale, [1.0, 2.0]);
-        assert_eq!(config.cube.size_scale, RandomizationConfig::defaults().cube.size_scale);
+        assert_eq!(
+            config.cube.size_scale,
+            RandomizationConfig::defaults().cube.size_scale
+        );
     }
 
     #[test]

@@ -156,10 +156,16 @@ mod tests {
         let check = |name: &str, values: Vec<f64>, [low, high]: Range| {
             let min = values.iter().copied().fold(f64::INFINITY, f64::min);
             let max = values.iter().copied().fold(f64::NEG_INFINITY, f64::max);
-            assert!(min >= low && max <= high, "{name}: {min}..{max} outside {low}..{high}");
+            assert!(
+                min >= low && max <= high,
+                "{name}: {min}..{max} outside {low}..{high}"
+            );
             // 2,000 uniform draws come within 1 % of each end.
             let slack = 0.01 * (high - low);
-            assert!(min <= low + slack && max >= high - slack, "{name}: {min}..{max}");
+            assert!(
+                min <= low + slack && max >= high - slack,
+                "{name}: {min}..{max}"
+            );
         };
         check(
             "cube size",
@@ -189,19 +195,28 @@ mod tests {
         let jitter = config.cameras.position_jitter;
         check(
             "top camera x",
-            draws.iter().map(|d| d.cameras[0].position_offset[0]).collect(),
+            draws
+                .iter()
+                .map(|d| d.cameras[0].position_offset[0])
+                .collect(),
             [-jitter, jitter],
         );
         let wrist = MOVING_CAMERA_JITTER_FRACTION * jitter;
         check(
             "wrist camera z",
-            draws.iter().map(|d| d.cameras[2].position_offset[2]).collect(),
+            draws
+                .iter()
+                .map(|d| d.cameras[2].position_offset[2])
+                .collect(),
             [-wrist, wrist],
         );
         let colour = config.cube.colour_jitter;
         check(
             "cube red",
-            draws.iter().map(|d| f64::from(d.cube_colour_offset[0])).collect(),
+            draws
+                .iter()
+                .map(|d| f64::from(d.cube_colour_offset[0]))
+                .collect(),
             [-colour - 1e-6, colour + 1e-6],
         );
     }

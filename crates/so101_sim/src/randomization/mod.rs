@@ -42,7 +42,12 @@ impl Randomizer {
     /// The next episode's draw for a scene of `look`.
     pub fn next_draw(&mut self, look: &SceneLook) -> EpisodeDraw {
         let seed = self.episodes.next_u64();
-        EpisodeDraw::new(&self.config, seed, look.light_count(), look.cameras_on_arm())
+        EpisodeDraw::new(
+            &self.config,
+            seed,
+            look.light_count(),
+            look.cameras_on_arm(),
+        )
     }
 }
 

@@ -6,7 +6,20 @@ from __future__ import annotations
 import importlib
 import sys
 
-BENCHMARKS = ("sim", "sim_core", "driver", "recorder", "cameras", "camera_node", "expert", "convert", "storage", "latency")
+BENCHMARKS = (
+    "sim",
+    "sim_core",
+    "driver",
+    "recorder",
+    "cameras",
+    "camera_node",
+    "expert",
+    "convert",
+    "storage",
+    "latency",
+    "servo_model",
+    "sysid",
+)
 
 
 def main(argv: list[str] | None = None) -> int:
