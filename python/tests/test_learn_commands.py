@@ -22,14 +22,22 @@ def test_demos_record_with_the_experts_noise_and_no_cameras_by_default(tmp_path)
     command = demos.launch_command(args, tmp_path)
     assert "--control=expert" in command and "--record" in command and "--episodes=7" in command
     assert "--teleop-args=--waypoint-noise 0.002 --action-noise 0.03" in command
-    assert "--sim-args=--cameras none" in command and "--speed=8" in command
+    assert "--sim-args=--cameras none --servo-params sts3215 --randomize off" in command and "--speed=8" in command
     assert f"--bags={tmp_path / 'bags'}" in command
+
+
+def test_demos_pass_the_servo_model_and_the_randomization_to_the_sim(tmp_path):
+    args = parse(demos, "demos", "--randomize", "--servo-params", "fit.json")
+    assert "--sim-args=--cameras none --servo-params fit.json --randomize default" in demos.launch_command(args, tmp_path)
+    args = parse(demos, "demos", "--randomize", "mine.toml")
+    assert any(part.endswith("--randomize mine.toml") for part in demos.launch_command(args, tmp_path))
 
 
 def test_demos_with_cameras_slow_down_so_every_frame_is_rendered(tmp_path):
     args = parse(demos, "demos", "--cameras", "top:128x96")
     command = demos.launch_command(args, tmp_path)
-    assert "--sim-args=--cameras top:128x96" in command and "--speed=4" in command
+    assert any(part.startswith("--sim-args=--cameras top:128x96 ") for part in command)
+    assert "--speed=4" in command
 
 
 def test_failed_demonstrations_stay_out_unless_kept(tmp_path):

@@ -45,8 +45,9 @@ TASKS = list(contract.TASKS.values())
 class FakeWorld:
     """so101_native.World's interface: every step succeeds."""
 
-    def __init__(self, scene, lite=True, task="", control_rate=0.0, dense_reward=False):
+    def __init__(self, scene, lite=True, task="", control_rate=0.0, dense_reward=False, servo_params="sts3215", randomize="off"):
         self.task, self.control_rate, self.success, self.cameras = task, control_rate, False, {}
+        self.episode_settings = '{"servo_model": "%s", "draw": null}' % servo_params
 
     def enable_cameras(self, cameras, renderer="auto"):
         self.cameras = dict(cameras)
@@ -68,7 +69,18 @@ class FakeWorld:
 class FakeWorldBatch:
     """so101_native.WorldBatch's interface: every stepped world succeeds."""
 
-    def __init__(self, num_envs, scene, lite=True, task="", control_rate=0.0, dense_reward=False, threads=0):
+    def __init__(
+        self,
+        num_envs,
+        scene,
+        lite=True,
+        task="",
+        control_rate=0.0,
+        dense_reward=False,
+        threads=0,
+        servo_params="sts3215",
+        randomize="off",
+    ):
         self.task, self.control_rate = task, control_rate
         self.successes = np.zeros(num_envs, dtype=bool)
 
