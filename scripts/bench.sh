@@ -10,6 +10,8 @@
 #   scripts/bench.sh expert [--episodes N] [--speed S] [--seed N] [--json FILE]
 #   scripts/bench.sh convert [--episodes N] [--sizes WxH,...] [--json FILE]
 #   scripts/bench.sh storage [--qualities Q,...] [--episodes N] [--long-minutes M] [--converter-src DIR] [--json FILE]
+#   scripts/bench.sh servo_model [--steps N] [--repeats N] [--json FILE]
+#   scripts/bench.sh sysid [--output DIR] [--joints a,b] [--json FILE]
 set -euo pipefail
 . "$(dirname "${BASH_SOURCE[0]}")/common.sh"
 help_if_asked "${BASH_SOURCE[0]}" "$@"
@@ -20,7 +22,7 @@ run() {
         --bin-dir "${CARGO_TARGET_DIR}/release" "${@:2}"
 }
 case "${1:-all}" in
-    sim | sim_core | driver | recorder | cameras | camera_node | expert | convert | storage) run "$@" ;;
-    all) run sim && run sim_core && run driver && run recorder && run cameras && run camera_node && run expert && run convert && run storage ;;
-    *) echo "usage: scripts/bench.sh [sim|sim_core|driver|recorder|cameras|camera_node|expert|convert|storage] [ARGS...]" >&2; exit 2 ;;
+    sim | sim_core | driver | recorder | cameras | camera_node | expert | convert | storage | servo_model | sysid) run "$@" ;;
+    all) run sim && run sim_core && run driver && run recorder && run cameras && run camera_node && run expert && run convert && run storage && run servo_model && run sysid ;;
+    *) echo "usage: scripts/bench.sh [sim|sim_core|driver|recorder|cameras|camera_node|expert|convert|storage|servo_model|sysid] [ARGS...]" >&2; exit 2 ;;
 esac

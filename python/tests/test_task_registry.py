@@ -14,6 +14,7 @@ and these tests need no built extension."""
 from __future__ import annotations
 
 import argparse
+import json
 import os
 import subprocess
 import sys
@@ -47,7 +48,7 @@ class FakeWorld:
 
     def __init__(self, scene, lite=True, task="", control_rate=0.0, dense_reward=False, servo_params="sts3215", randomize="off"):
         self.task, self.control_rate, self.success, self.cameras = task, control_rate, False, {}
-        self.episode_settings = '{"servo_model": "%s", "draw": null}' % servo_params
+        self.episode_settings = json.dumps({"servo_model": servo_params, "draw": None})
 
     def enable_cameras(self, cameras, renderer="auto"):
         self.cameras = dict(cameras)

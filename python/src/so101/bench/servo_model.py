@@ -9,8 +9,10 @@ median of --repeats. Issue 31's target: the model at >= 0.9x the anchor.
 from __future__ import annotations
 
 import argparse
+import json
 import statistics
 import time
+from pathlib import Path
 
 import numpy as np
 
@@ -48,6 +50,8 @@ def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(
         prog="so101-bench servo_model", description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
     )
+    p.add_argument("--bin-dir", type=Path, default=None, help="the built binaries (scripts/bench.sh passes it)")
+    p.add_argument("--json", type=Path, default=None, help="also write the numbers here")
     p.add_argument("--steps", type=int, default=3000, help="control periods per measurement")
     p.add_argument("--repeats", type=int, default=5, help="measurements per case (interleaved); the median is reported")
     args = p.parse_args(argv)
@@ -64,6 +68,8 @@ def main(argv: list[str] | None = None) -> int:
         print(f"| {label} | {median:,.0f} | {runs} | {median / anchor:.2f}x |")
     model = statistics.median(rates[CASES[1][0]])
     print(f"servo model cost: {model / anchor:.2f}x the gain-80 servos' physics steps/s (target >= 0.9x)")
+    if args.json:
+        args.json.write_text(json.dumps({"physics_steps_per_second": rates, "ratio": model / anchor}, indent=2))
     return 0
 
 

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import subprocess
 import sys
 import tempfile
@@ -65,9 +66,13 @@ def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(
         prog="so101-bench sysid", description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
     )
+    p.add_argument("--bin-dir", type=Path, default=None, help="the built binaries (scripts/bench.sh passes it)")
+    p.add_argument("--json", type=Path, default=None, help="also write the numbers here")
     p.add_argument("--output", default=None, help="keep the bags and files here (default: a temporary directory)")
     p.add_argument("--joints", default=None, help="joints to identify (default: all six)")
     args = p.parse_args(argv)
+    if args.bin_dir:
+        os.environ["SO101_BIN_DIR"] = str(args.bin_dir)
     output = Path(args.output or tempfile.mkdtemp(prefix="so101_sysid_bench_"))
     output.mkdir(parents=True, exist_ok=True)
     truth = truth_params()
@@ -112,6 +117,8 @@ def main(argv: list[str] | None = None) -> int:
             f"{before['gripper_rms_mm']:.2f} / {after['gripper_rms_mm']:.2f} |"
         )
     print(f"identification error: {100 * max(worst.values()):.0f} %")
+    if args.json:
+        args.json.write_text(json.dumps({"relative_errors": errors, "largest": worst, "gaps": gaps}, indent=2))
     print(f"(files in {output})")
     return 0
 
