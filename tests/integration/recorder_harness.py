@@ -33,7 +33,17 @@ SIM_RECORDED_TOPICS = {
     "/cube/pose": "geometry_msgs/msg/PoseStamped",
     "/diagnostics": "diagnostic_msgs/msg/DiagnosticArray",
 }
-CUSTOM_DATA_KEYS = {"episode_index", "task", "success", "seed", "start_time_ns", "stop_time_ns", "dropped_messages", "error"}
+CUSTOM_DATA_KEYS = {
+    "episode_index",
+    "task",
+    "success",
+    "seed",
+    "start_time_ns",
+    "stop_time_ns",
+    "dropped_messages",
+    "error",
+    "simulation",  # the sim's /sim/episode settings, empty without a sim
+}
 # The keys of one rosbag2 (Jazzy) QoS profile.
 QOS_KEYS = {
     "history",
@@ -178,6 +188,8 @@ def check_metadata_fields(info: dict, episode: Path) -> None:
     assert re.fullmatch(r"\d+", custom["start_time_ns"]) and re.fullmatch(r"\d+", custom["stop_time_ns"]), custom
     assert int(custom["start_time_ns"]) <= int(custom["stop_time_ns"])
     assert re.fullmatch(r"\d+", custom["dropped_messages"]), custom["dropped_messages"]
+    # The sim's settings are JSON with the servo model; empty when no sim published any.
+    assert custom["simulation"] == "" or "servo_model" in json.loads(custom["simulation"]), custom["simulation"]
 
 
 # =========================================================================== MCAP reading
