@@ -168,6 +168,8 @@ def test_lerobot_train_evaluates_on_the_env_and_lerobot_eval_runs_its_policy(dat
             f"--policy.path={checkpoint}",
             "--policy.device=cpu",
             *ENV_FLAGS,
+            "--env.randomize=default",
+            "--env.servo_params=sts3215",
             "--eval.n_episodes=1",
             "--eval.batch_size=1",
             "--eval.use_async_envs=false",
@@ -194,3 +196,19 @@ def test_lerobot_train_evaluates_on_the_env_and_lerobot_eval_runs_its_policy(dat
         frames = [frame.to_ndarray(format="rgb24") for frame in container.decode(video=0)]
     assert len(frames) >= 8 and frames[0].shape[0] >= WATCHABLE_HEIGHT, (len(frames), frames[0].shape)
     assert frames[-1].std() > 5, "a blank video"
+    # LeRobot's CLI set --env.randomize: the first frame is seed 7's randomized scene, not the
+    # nominal one (colours, lights and the camera moved).
+    from so101.lerobot.adapter import So101LeRobotEnv
+
+    def first_frame(randomize: str) -> np.ndarray:
+        env = So101LeRobotEnv(cameras={"top": (48, 64)}, randomize=randomize)
+        try:
+            env.reset(seed=7)
+            return env.render().astype(float)  # enlarged as lerobot-eval films it
+        finally:
+            env.close()
+
+    filmed = frames[0].astype(float)
+    to_randomized = np.abs(filmed - first_frame("default")).mean()
+    to_nominal = np.abs(filmed - first_frame("off")).mean()
+    assert to_randomized < 0.5 * to_nominal, (to_randomized, to_nominal)
