@@ -248,16 +248,24 @@ class So101RosEnv(gym.Env):
         super().reset(seed=seed)
         settings_seen = len(self._episode_settings)
         if seed is not None or self._process is None:
-            # A seed restarts the sim with it, so the same seed gives the same episodes.
+            # A seed restarts the sim with it, so the same seed gives the same episodes. The
+            # latched topic keeps one message: a subscriber matched late sees only the newest.
             self._episode_settings.clear()
-            settings_seen = 1  # the node's first message is of its start, before the reset
+            settings_seen = 0
             counts = self._restart_and_reset(seed if seed is not None else 0)
         else:
             counts = dict(self._counts)
             self._call(self._reset_client, "/sim/reset")
         observation = self._observe(counts)
+
+        def reset_settings_arrived() -> bool:
+            if len(self._episode_settings) <= settings_seen:
+                return False
+            # With randomization, the node's message from before any reset has no draw.
+            return self._randomize == "off" or json.loads(self._episode_settings[-1])["draw"] is not None
+
         # The node publishes the episode's settings before it answers the reset.
-        self._spin_until(lambda: len(self._episode_settings) > settings_seen, "/sim/episode")
+        self._spin_until(reset_settings_arrived, "/sim/episode")
         settings = json.loads(self._episode_settings[-1])
         return observation, {"is_success": bool(self._latest["success"].data), "episode_settings": settings}
 
