@@ -8,17 +8,16 @@ from pathlib import Path
 
 import pytest
 
-from so101.learn import demos, lerobot_train
+from so101.learn import cli, demos, lerobot_train
 
 
-def parse(module, name: str, *argv: str) -> argparse.Namespace:
-    p = argparse.ArgumentParser()
-    module.add_parser(p.add_subparsers(), name)
-    return p.parse_args([name, *argv])
+def parse(name: str, *argv: str) -> argparse.Namespace:
+    """so101-learn's arguments for the recipe `name`, as its command line parses them."""
+    return cli.parser().parse_args([name, *argv])
 
 
 def test_demos_record_with_the_experts_noise_and_no_cameras_by_default(tmp_path):
-    args = parse(demos, "demos", "--episodes", "7", "--waypoint-noise", "0.002", "--action-noise", "0.03")
+    args = parse("demos", "--episodes", "7", "--waypoint-noise", "0.002", "--action-noise", "0.03")
     command = demos.launch_command(args, tmp_path)
     assert "--control=expert" in command and "--record" in command and "--episodes=7" in command
     assert "--teleop-args=--waypoint-noise 0.002 --action-noise 0.03" in command
@@ -27,28 +26,42 @@ def test_demos_record_with_the_experts_noise_and_no_cameras_by_default(tmp_path)
 
 
 def test_demos_pass_the_servo_model_and_the_randomization_to_the_sim(tmp_path):
-    args = parse(demos, "demos", "--randomize", "--servo-params", "fit.json")
-    assert "--sim-args=--cameras none --servo-params fit.json --randomize default" in demos.launch_command(args, tmp_path)
-    args = parse(demos, "demos", "--randomize", "mine.toml")
-    assert any(part.endswith("--randomize mine.toml") for part in demos.launch_command(args, tmp_path))
+    fit, ranges = tmp_path / "fit.json", tmp_path / "mine.toml"
+    fit.write_text("{}")
+    ranges.write_text("")
+    args = parse("demos", "--randomize", "--servo-params", str(fit))
+    assert f"--sim-args=--cameras none --servo-params {fit} --randomize default" in demos.launch_command(args, tmp_path)
+    args = parse("demos", "--randomize", str(ranges))
+    assert any(part.endswith(f"--randomize {ranges}") for part in demos.launch_command(args, tmp_path))
+    for spelling, spec in (("true", "default"), ("false", "off"), ("OFF", "off"), ("default", "default")):
+        assert parse("demos", "--randomize", spelling).randomize == spec
+
+
+def test_demos_refuse_a_randomization_or_servo_model_they_cannot_use(capsys):
+    for argv in (["--randomize", "maybe"], ["--servo-params", "sts3250"]):
+        with pytest.raises(SystemExit) as exit:
+            parse("demos", *argv)
+        assert exit.value.code == 2
+        err = capsys.readouterr().err
+        assert argv[1] in err and ("'default'" in err or "gain80" in err), err
 
 
 def test_demos_with_cameras_slow_down_so_every_frame_is_rendered(tmp_path):
-    args = parse(demos, "demos", "--cameras", "top:128x96")
+    args = parse("demos", "--cameras", "top:128x96")
     command = demos.launch_command(args, tmp_path)
     assert any(part.startswith("--sim-args=--cameras top:128x96 ") for part in command)
     assert "--speed=4" in command
 
 
 def test_failed_demonstrations_stay_out_unless_kept(tmp_path):
-    assert "--successful-only" in demos.convert_command(parse(demos, "demos"), tmp_path)
-    assert "--successful-only" not in demos.convert_command(parse(demos, "demos", "--keep-failures"), tmp_path)
+    assert "--successful-only" in demos.convert_command(parse("demos"), tmp_path)
+    assert "--successful-only" not in demos.convert_command(parse("demos", "--keep-failures"), tmp_path)
 
 
 @pytest.mark.parametrize("recipe", ["act", "diffusion"])
 def test_lerobot_train_gets_the_whole_preset_and_extra_arguments_last(recipe, tmp_path):
     dataset = tmp_path / "my_demos"
-    args = parse(lerobot_train, recipe, "--dataset", str(dataset), "--steps", "50", "--policy-arg=--policy.foo=1")
+    args = parse(recipe, "--dataset", str(dataset), "--steps", "50", "--policy-arg=--policy.foo=1")
     command = lerobot_train.train_command(args, tmp_path / "out")
     assert Path(command[0]).name == "lerobot-train"
     assert f"--policy.type={recipe}" in command and "--policy.device=cpu" in command
@@ -64,7 +77,7 @@ def test_lerobot_train_gets_the_whole_preset_and_extra_arguments_last(recipe, tm
 
 
 def test_evaluation_goes_through_the_runner_on_unseen_seeds(tmp_path):
-    args = parse(lerobot_train, "act", "--dataset", str(tmp_path), "--eval", "100")
+    args = parse("act", "--dataset", str(tmp_path), "--eval", "100")
     command = lerobot_train.eval_command(args, tmp_path / "model", tmp_path / "eval")
     assert command[command.index("-m") + 1] == "so101.run_policy"
     assert "--eval=100" in command and "--seed=1000" in command and "--backend=ros" in command
@@ -77,7 +90,7 @@ def test_diffusion_scales_actions_into_its_samplers_clip_range_act_by_mean_and_s
     import json
 
     for recipe, action in (("diffusion", "MIN_MAX"), ("act", "MEAN_STD")):
-        command = lerobot_train.train_command(parse(lerobot_train, recipe, "--dataset", str(tmp_path)), tmp_path / "out")
+        command = lerobot_train.train_command(parse(recipe, "--dataset", str(tmp_path)), tmp_path / "out")
         (mapping,) = [arg.split("=", 1)[1] for arg in command if arg.startswith("--policy.normalization_mapping=")]
         assert json.loads(mapping)["ACTION"] == action, recipe
 
@@ -98,16 +111,14 @@ def test_a_dataset_with_cameras_gets_a_backbone_from_scratch_and_colour_augmenta
     assert lerobot_train.dataset_cameras(tmp_path / "cameras") == ["observation.images.top"]
 
     def command(dataset: str, recipe: str = "act") -> list[str]:
-        return lerobot_train.train_command(parse(lerobot_train, recipe, "--dataset", str(tmp_path / dataset)), tmp_path / "o")
+        return lerobot_train.train_command(parse(recipe, "--dataset", str(tmp_path / dataset)), tmp_path / "o")
 
     assert not any("image_transforms" in arg or "backbone" in arg for arg in command("state"))
     assert "--steps=1500" in command("state") and "--batch_size=64" in command("state")
     vision = command("cameras")
     # A camera policy's own length: the annealing that brought the grasp ends at 4,000 steps.
     assert "--steps=4000" in vision and "--batch_size=32" in vision
-    chosen = lerobot_train.train_command(
-        parse(lerobot_train, "act", "--dataset", str(tmp_path / "cameras"), "--steps", "7"), tmp_path / "o"
-    )
+    chosen = lerobot_train.train_command(parse("act", "--dataset", str(tmp_path / "cameras"), "--steps", "7"), tmp_path / "o")
     assert "--steps=7" in chosen and "--batch_size=32" in chosen
     assert "--policy.pretrained_backbone_weights=null" in vision
     assert "--dataset.image_transforms.enable=true" in vision

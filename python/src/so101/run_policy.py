@@ -28,6 +28,7 @@ from .envs.spaces import reward_mode
 from .messages import cube_pose_vector, joint_positions, rgb_image
 from .policy import PolicyError, StackPolicy
 from .rclpy_wait import spin_until
+from .sim_options import DEFAULT_SERVO_MODEL, randomize_argument, servo_params_argument
 from .units import JOINT_LIMITS, JOINT_NAMES
 
 log = logging.getLogger("so101-run-policy")
@@ -296,17 +297,19 @@ def parser() -> argparse.ArgumentParser:
     ev.add_argument("--lite", action="store_true", help="sim without meshes (faster to render on a CPU)")
     ev.add_argument(
         "--servo-params",
-        default="sts3215",
-        help="the sim's servo model: sts3215 (default), gain80, or a parameter file from so101-sysid fit",
+        type=servo_params_argument,
+        default=DEFAULT_SERVO_MODEL,
+        help=f"the sim's servo model: sts3215, gain80, or a parameter file from so101-sysid fit (default {DEFAULT_SERVO_MODEL})",
     )
     ev.add_argument(
         "--randomize",
+        type=randomize_argument,
         nargs="?",
         const="default",
         default="off",
         metavar="RANGES",
         help="domain randomization of every episode, seeded by its seed: the default ranges "
-        "(assets/randomization.toml) or a .toml of your own",
+        "(assets/randomization.toml; also `true`), `off`/`false`, or a .toml of your own",
     )
     ev.add_argument(
         "--video-camera",

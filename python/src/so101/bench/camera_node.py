@@ -39,6 +39,7 @@ from so101.bench import common as bench_common
 from so101.bench.latency import percentile
 from so101.bench.recorder import cpu_seconds
 from so101.paths import asset
+from so101.subcommands import Subcommand, run_alone
 
 CAMERA = "fake:640x480@30,textured"  # JPEGs of about 54 kB, as a webcam's
 FPS = 30.0
@@ -235,15 +236,15 @@ def stamp_gaps(episode: Path) -> dict[str, int]:
     return gaps
 
 
-def main() -> int:
-    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--bin-dir", type=Path, required=True)
     parser.add_argument("--seconds", type=float, default=20.0, help="measured seconds of each run")
     parser.add_argument("--warmup", type=float, default=3.0, help="seconds before each measurement")
     parser.add_argument("--repeats", type=int, default=3, help="runs of each CPU measurement (medians)")
     parser.add_argument("--json", type=Path)
-    args = parser.parse_args()
 
+
+def run(args: argparse.Namespace) -> int:
     results: dict = {}
     work = Path(tempfile.mkdtemp(prefix="so101_bench_camera_node_"))
     try:
@@ -310,6 +311,13 @@ def markdown(results: dict, args) -> list[str]:
         f"CPU (of one core): {cpu}.",
     ]
     return lines
+
+
+SUBCOMMAND = Subcommand("so101_camera_node's CPU, latency and full load on its fake 640x480 camera", add_arguments, run, __doc__)
+
+
+def main(argv: list[str] | None = None) -> int:
+    return run_alone("so101-bench camera_node", SUBCOMMAND, argv)
 
 
 if __name__ == "__main__":

@@ -27,6 +27,7 @@ from pathlib import Path
 
 from so101 import contract, process
 from so101.bench import common as bench_common
+from so101.subcommands import Subcommand, run_alone
 
 # (label, lite, cameras, size)
 CONFIGS = [
@@ -92,15 +93,15 @@ def node_max_speed(bin_dir: Path, lite: bool, cameras: str, size: str, seconds: 
     return run_node(bin_dir, args, seconds, with_subscriber)
 
 
-def main() -> int:
-    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--bin-dir", type=Path, required=True)
     parser.add_argument("--repeats", type=int, default=3)
     parser.add_argument("--seconds", type=float, default=8.0, help="wall time of each node run")
     parser.add_argument("--frames", type=int, default=150, help="frames of each anchor run (after 10 of warm-up)")
     parser.add_argument("--json", type=Path, default=None)
-    args = parser.parse_args()
 
+
+def run(args: argparse.Namespace) -> int:
     results: dict = {"configs": {}, "rclpy_subscriber": [], "real_time": None}
     for label, lite, cameras, size in CONFIGS:
         runs = []
@@ -159,6 +160,13 @@ def main() -> int:
         ),
     ]
     return bench_common.report(lines, results, args.json)
+
+
+SUBCOMMAND = Subcommand("so101_sim_node's camera rendering against a bare MuJoCo render loop", add_arguments, run, __doc__)
+
+
+def main(argv: list[str] | None = None) -> int:
+    return run_alone("so101-bench cameras", SUBCOMMAND, argv)
 
 
 if __name__ == "__main__":

@@ -19,6 +19,7 @@ from pathlib import Path
 
 from so101 import contract
 from so101.bench import common as bench_common
+from so101.subcommands import Subcommand, run_alone
 
 
 def node_env() -> dict:
@@ -95,13 +96,14 @@ def convert(bags: Path, output: Path) -> dict:
     return {"seconds": total, "frames": frames, "encode_seconds": spent["encode"], "videos": spent["videos"]}
 
 
-def main() -> int:
-    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--bin-dir", type=Path, required=True)
     parser.add_argument("--episodes", type=int, default=3)
     parser.add_argument("--sizes", default="320x240,640x480", help="camera sizes to measure, comma-separated")
     parser.add_argument("--json", type=Path, default=None)
-    args = parser.parse_args()
+
+
+def run(args: argparse.Namespace) -> int:
     results = {}
     for size in args.sizes.split(","):
         with tempfile.TemporaryDirectory() as work:
@@ -119,6 +121,13 @@ def main() -> int:
             f"({r['videos']} videos, {r['encode_seconds']:.1f} s) |"
         )
     return bench_common.report(lines, results, args.json)
+
+
+SUBCOMMAND = Subcommand("so101-bag-to-lerobot's frames/s and its share in video encoding", add_arguments, run, __doc__)
+
+
+def main(argv: list[str] | None = None) -> int:
+    return run_alone("so101-bench convert", SUBCOMMAND, argv)
 
 
 if __name__ == "__main__":

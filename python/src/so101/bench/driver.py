@@ -25,6 +25,7 @@ import tempfile
 from pathlib import Path
 
 from so101.contract import JOINT_NAMES
+from so101.subcommands import Subcommand, run_alone
 
 BITS_PER_BYTE = 10
 SYNC_READ_REQUEST = 8 + 6  # FF FF FE LEN 82 ADDR SIZE CHK + 6 ids
@@ -115,15 +116,15 @@ def run_once(bin_dir: Path, workdir: Path, baud: int, rate: str, telemetry_rate:
         emulator.wait(timeout=10)
 
 
-def main() -> int:
-    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--bin-dir", type=Path, required=True, help="directory of the release binaries")
     parser.add_argument("--seconds", type=float, default=10.0, help="length of each run")
     parser.add_argument("--repeats", type=int, default=3, help="runs per configuration (medians are reported)")
     parser.add_argument("--baud", type=int, default=1_000_000)
     parser.add_argument("--json", type=Path, help="write the raw results here")
-    args = parser.parse_args()
 
+
+def run(args: argparse.Namespace) -> int:
     # The last one has no wire time at all: what a cycle costs in the pty and the driver alone.
     configurations = [
         ("max rate, telemetry 10 Hz (default)", "max", 10.0, "realistic"),
@@ -176,6 +177,15 @@ def main() -> int:
     if args.json:
         args.json.write_text(json.dumps(results, indent=2))
     return 0
+
+
+SUBCOMMAND = Subcommand(
+    "so101_feetech_driver's cycle rate and lateness against the emulator's wire limit", add_arguments, run, __doc__
+)
+
+
+def main(argv: list[str] | None = None) -> int:
+    return run_alone("so101-bench driver", SUBCOMMAND, argv)
 
 
 if __name__ == "__main__":

@@ -19,6 +19,7 @@ import time
 from pathlib import Path
 
 from so101.bench import common as bench_common
+from so101.subcommands import Subcommand, run_alone
 
 
 def node_env() -> dict:
@@ -68,15 +69,15 @@ def run_expert(
         return result
 
 
-def main() -> int:
-    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--bin-dir", type=Path, required=True)
     parser.add_argument("--episodes", type=int, default=50)
     parser.add_argument("--speed", type=float, default=4.0, help="sim speed factor (the expert runs on sim time)")
     parser.add_argument("--seed", type=int, default=1, help="sim seed (cube placements)")
     parser.add_argument("--json", type=Path, default=None)
-    args = parser.parse_args()
 
+
+def run(args: argparse.Namespace) -> int:
     noises = {
         "no noise": (0.0, 0.0),
         "waypoint noise 3 mm, action noise 0.005 rad": (0.003, 0.005),
@@ -103,6 +104,13 @@ def main() -> int:
             )
         print(f"{label}: {result['successes']}/{result['episodes']}", file=sys.stderr)
     return bench_common.report(lines, runs, args.json)
+
+
+SUBCOMMAND = Subcommand("the scripted expert's success rate on cube_to_bin against so101_sim_node", add_arguments, run, __doc__)
+
+
+def main(argv: list[str] | None = None) -> int:
+    return run_alone("so101-bench expert", SUBCOMMAND, argv)
 
 
 if __name__ == "__main__":

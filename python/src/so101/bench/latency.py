@@ -36,6 +36,7 @@ from so101.isolation import network_namespace_problem
 from so101.paths import node_binary, node_environment, repo_root
 from so101.process import start
 from so101.process import stop as stop_process
+from so101.subcommands import Subcommand, run_alone
 
 
 def set_default_environment() -> None:
@@ -267,8 +268,7 @@ def run_node(args) -> dict:
 
 
 # --------------------------------------------------------------------------- main
-def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--pingpong", action="store_true", help="rclpy <-> rclpy round-trip baseline")
     parser.add_argument("--samples", "-n", type=int, default=1000, help="measured samples (default 1000)")
     parser.add_argument("--warmup", type=int, default=50, help="samples dropped first (default 50)")
@@ -281,8 +281,9 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--full-scene", action="store_true", help="node: do not add --lite to the spawned node")
     parser.add_argument("--role", choices=["echo"], help=argparse.SUPPRESS)
     parser.add_argument("node_args", nargs="*", help="node: extra arguments of the spawned node, after '--' (--lite is added)")
-    args = parser.parse_args(argv)
 
+
+def run(args: argparse.Namespace) -> int:
     problem = network_namespace_problem()
     if problem:
         print(
@@ -296,7 +297,8 @@ def main(argv: list[str] | None = None) -> int:
     if args.role == "echo":
         return run_echo(args)
     if args.samples <= 0:
-        parser.error("--samples must be positive")
+        print("so101-bench latency: --samples must be positive", file=sys.stderr)
+        return 2
     result = run_pingpong(args) if args.pingpong else run_node(args)
     try:
         import rclpy.utilities
@@ -307,6 +309,15 @@ def main(argv: list[str] | None = None) -> int:
     result["python"] = ".".join(str(part) for part in sys.version_info[:3])
     print(json.dumps(result), flush=True)
     return 0 if result["samples"] > 0 else 1
+
+
+SUBCOMMAND = Subcommand(
+    "ROS 2 graph latency: rclpy ping-pong and the sim node's reaction, one JSON line", add_arguments, run, __doc__
+)
+
+
+def main(argv: list[str] | None = None) -> int:
+    return run_alone("so101-bench latency", SUBCOMMAND, argv)
 
 
 if __name__ == "__main__":

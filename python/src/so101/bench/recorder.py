@@ -28,6 +28,7 @@ from pathlib import Path
 
 from so101 import contract, process
 from so101.paths import node_environment
+from so101.subcommands import Subcommand, run_alone
 
 CLOCK_TICKS = os.sysconf("SC_CLK_TCK")
 
@@ -136,8 +137,7 @@ def rust_write(bin_dir: Path, bag: str, out: Path, mode: str, fsync: bool) -> fl
     return json.loads(done.stdout)["seconds"]
 
 
-def main() -> int:
-    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--bin-dir", type=Path, required=True)
     parser.add_argument("--seconds", type=float, default=10.0, help="publishing time of the reference-load recording")
     parser.add_argument("--sweep-seconds", type=float, default=4.0, help="publishing time of each sweep step")
@@ -145,8 +145,9 @@ def main() -> int:
     parser.add_argument("--repeats", type=int, default=3, help="repeats of the writer comparison (medians)")
     parser.add_argument("--workdir", type=Path, default=None, help="where bags go (default: a temporary directory)")
     parser.add_argument("--json", type=Path)
-    args = parser.parse_args()
 
+
+def run(args: argparse.Namespace) -> int:
     work = Path(tempfile.mkdtemp(prefix="so101_bench_recorder_", dir=args.workdir))
     results: dict = {}
     try:
@@ -232,6 +233,15 @@ def main() -> int:
     if args.json:
         args.json.write_text(json.dumps(results, indent=2))
     return 0
+
+
+SUBCOMMAND = Subcommand(
+    "recorder_node's sustained rates and its writer against Python's mcap writer", add_arguments, run, __doc__
+)
+
+
+def main(argv: list[str] | None = None) -> int:
+    return run_alone("so101-bench recorder", SUBCOMMAND, argv)
 
 
 if __name__ == "__main__":

@@ -18,6 +18,7 @@ import numpy as np
 
 from .. import contract
 from ..envs.inprocess import default_scene
+from ..subcommands import Subcommand, run_alone
 from .sim_core import random_actions
 
 CASES = (
@@ -46,15 +47,14 @@ def physics_steps_per_second(servo_params: str, randomize: str, steps: int) -> f
     return (world.physics_steps - physics_before) / elapsed
 
 
-def main(argv: list[str] | None = None) -> int:
-    p = argparse.ArgumentParser(
-        prog="so101-bench servo_model", description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
-    )
+def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--bin-dir", type=Path, default=None, help="the built binaries (scripts/bench.sh passes it)")
     p.add_argument("--json", type=Path, default=None, help="also write the numbers here")
     p.add_argument("--steps", type=int, default=3000, help="control periods per measurement")
     p.add_argument("--repeats", type=int, default=5, help="measurements per case (interleaved); the median is reported")
-    args = p.parse_args(argv)
+
+
+def run(args: argparse.Namespace) -> int:
     rates: dict[str, list[float]] = {label: [] for label, _, _ in CASES}
     for _ in range(args.repeats):
         for label, servo_params, randomize in CASES:
@@ -71,6 +71,13 @@ def main(argv: list[str] | None = None) -> int:
     if args.json:
         args.json.write_text(json.dumps({"physics_steps_per_second": rates, "ratio": model / anchor}, indent=2))
     return 0
+
+
+SUBCOMMAND = Subcommand("physics steps/s with the STS3215 servo model against the gain-80 servos", add_arguments, run, __doc__)
+
+
+def main(argv: list[str] | None = None) -> int:
+    return run_alone("so101-bench servo_model", SUBCOMMAND, argv)
 
 
 if __name__ == "__main__":

@@ -24,6 +24,7 @@ from pathlib import Path
 from so101 import process
 from so101.bench import common as bench_common
 from so101.paths import asset
+from so101.subcommands import Subcommand, run_alone
 
 
 def node_env() -> dict:
@@ -126,15 +127,15 @@ def us(result: dict, key: str) -> float:
     raise KeyError(f"{key} not in {result}")
 
 
-def main() -> int:
-    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--bin-dir", type=Path, required=True)
     parser.add_argument("--repeats", type=int, default=3)
     parser.add_argument("--seconds", type=float, default=10.0, help="wall time of each --speed max run")
     parser.add_argument("--samples", type=int, default=1000, help="latency samples per measurement")
     parser.add_argument("--json", type=Path, default=None)
-    args = parser.parse_args()
 
+
+def run(args: argparse.Namespace) -> int:
     results: dict = {"speed": [], "latency": {}}
     for repeat in range(args.repeats):
         # Interleaved, so drift of the machine affects both sides of each ratio alike.
@@ -179,6 +180,15 @@ def main() -> int:
             f"| {label} | {us(result, 'p50'):.0f} | {us(result, 'p99'):.0f} | {us(result, 'p50') / us(base, 'p50'):.2f} |"
         )
     return bench_common.report(lines, results, args.json)
+
+
+SUBCOMMAND = Subcommand(
+    "so101_sim_node's speed and reaction latency against mujoco-testspeed and rclpy", add_arguments, run, __doc__
+)
+
+
+def main(argv: list[str] | None = None) -> int:
+    return run_alone("so101-bench sim", SUBCOMMAND, argv)
 
 
 if __name__ == "__main__":

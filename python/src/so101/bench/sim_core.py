@@ -31,6 +31,7 @@ import numpy as np
 
 from so101 import contract
 from so101.bench import common as bench_common
+from so101.subcommands import Subcommand, run_alone
 
 LERE_PACKAGE = "lerobot-env-so101==0.4.0"
 CAMERAS = {"none": None, "64x48": (48, 64), "320x240": (240, 320)}
@@ -249,11 +250,7 @@ def child(argv: list[str]) -> int:
     return 0
 
 
-def main(argv: list[str] | None = None) -> int:
-    argv = list(sys.argv[1:] if argv is None else argv)
-    if argv[:1] == ["--child"]:
-        return child(argv[1:])
-    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0], formatter_class=argparse.RawDescriptionHelpFormatter)
+def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--bin-dir", type=Path, help="directory of the release binaries (so101_sim_node)")
     parser.add_argument("--steps", type=int, default=3000, help="env steps measured per contender (ROS: a fifth)")
     parser.add_argument("--repeats", type=int, default=3, help="runs of each contender; the median is reported")
@@ -261,7 +258,9 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--cameras", default="none,64x48,320x240", help="camera cases, comma-separated")
     parser.add_argument("--skip-ros", action="store_true", help="leave out the ROS rows (no namespace needed)")
     parser.add_argument("--json", type=Path, help="write the raw numbers here")
-    args = parser.parse_args(argv)
+
+
+def run(args: argparse.Namespace) -> int:
     if args.bin_dir:
         os.environ["SO101_BIN_DIR"] = str(args.bin_dir)
     ensure_lerobot_env_so101()
@@ -306,6 +305,21 @@ def main(argv: list[str] | None = None) -> int:
         f"the in-process env without cameras runs at {results['cases'].get('none', {}).get('inprocess', float('nan')) / results['engine_ceiling']:.2f}x of it."
     )
     return bench_common.report(lines, results, args.json)
+
+
+SUBCOMMAND = Subcommand(
+    "Gymnasium env steps/s of the in-process envs, the batch and the ROS backend against MuJoCo's own",
+    add_arguments,
+    run,
+    __doc__.split("\n\n")[0],
+)
+
+
+def main(argv: list[str] | None = None) -> int:
+    argv = list(sys.argv[1:] if argv is None else argv)
+    if argv[:1] == ["--child"]:
+        return child(argv[1:])
+    return run_alone("so101-bench sim_core", SUBCOMMAND, argv)
 
 
 if __name__ == "__main__":

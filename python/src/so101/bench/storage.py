@@ -39,6 +39,7 @@ import yaml
 from so101 import contract
 from so101.bench import common as bench_common
 from so101.launch_plan import COMPRESSED_RECORDING, DEFAULT_JPEG_QUALITY
+from so101.subcommands import Subcommand, run_alone
 
 CAMERAS = contract.CAMERA_NAMES
 FIRST_EPISODE = f"{contract.EPISODE_DEFAULT_PREFIX}_{0:06d}"  # the recorder's first bag directory
@@ -239,8 +240,7 @@ def repeat_episode(source: Path, target: Path, seconds: float) -> float:
     return repeats * span
 
 
-def main() -> int:
-    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--bin-dir", type=Path, required=True)
     parser.add_argument("--qualities", default="90,95,98,100", help="JPEG qualities to record, comma-separated")
     parser.add_argument("--quality", type=int, default=DEFAULT_JPEG_QUALITY, help="the one converted (so101-launch's default)")
@@ -252,7 +252,9 @@ def main() -> int:
     parser.add_argument("--old-seconds", default="30,60", help="with --converter-src: raw episode lengths it converts")
     parser.add_argument("--workdir", type=Path, default=None, help="where the bags go (default: a temporary directory)")
     parser.add_argument("--json", type=Path, default=None)
-    args = parser.parse_args()
+
+
+def run(args: argparse.Namespace) -> int:
     qualities = [int(q) for q in args.qualities.split(",")]
     if args.quality not in qualities:
         qualities.append(args.quality)
@@ -365,6 +367,13 @@ def report_lines(results: dict, args) -> list[str]:
                     f"{r['peak_rss_mb']:.0f} ({r['peak_tree_rss_mb']:.0f}, {r['peak_tree_pss_mb']:.0f}) |"
                 )
     return lines
+
+
+SUBCOMMAND = Subcommand("recording size, image fidelity and conversion at scale", add_arguments, run, __doc__)
+
+
+def main(argv: list[str] | None = None) -> int:
+    return run_alone("so101-bench storage", SUBCOMMAND, argv)
 
 
 if __name__ == "__main__":

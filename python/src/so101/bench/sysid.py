@@ -18,6 +18,7 @@ import tempfile
 from pathlib import Path
 
 from .. import contract
+from ..subcommands import Subcommand, run_alone
 
 # The emulated arm's truth, relative to the sts3215 preset: every fitted parameter moved.
 TRUTH = {"gain_per_p": 0.5, "damping": 1.6, "friction": 2.0, "armature": 1.4}
@@ -62,15 +63,14 @@ def sysid(*argv) -> str:
     return done.stdout
 
 
-def main(argv: list[str] | None = None) -> int:
-    p = argparse.ArgumentParser(
-        prog="so101-bench sysid", description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
-    )
+def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--bin-dir", type=Path, default=None, help="the built binaries (scripts/bench.sh passes it)")
     p.add_argument("--json", type=Path, default=None, help="also write the numbers here")
     p.add_argument("--output", default=None, help="keep the bags and files here (default: a temporary directory)")
     p.add_argument("--joints", default=None, help="joints to identify (default: all six)")
-    args = p.parse_args(argv)
+
+
+def run(args: argparse.Namespace) -> int:
     if args.bin_dir:
         os.environ["SO101_BIN_DIR"] = str(args.bin_dir)
     output = Path(args.output or tempfile.mkdtemp(prefix="so101_sysid_bench_"))
@@ -121,6 +121,15 @@ def main(argv: list[str] | None = None) -> int:
         args.json.write_text(json.dumps({"relative_errors": errors, "largest": worst, "gaps": gaps}, indent=2))
     print(f"(files in {output})")
     return 0
+
+
+SUBCOMMAND = Subcommand(
+    "so101-sysid against the emulator's known servo parameters: the identification error", add_arguments, run, __doc__
+)
+
+
+def main(argv: list[str] | None = None) -> int:
+    return run_alone("so101-bench sysid", SUBCOMMAND, argv)
 
 
 if __name__ == "__main__":

@@ -6,6 +6,8 @@ trajectory for the same seed and actions (so101.envs.ros is the other one).
 Observations and actions: so101.envs.spaces. Reward: the task's (`dense_reward=True`:
 cube_to_bin's staged shaping); terminated when the task succeeds if the task's facts say so
 (contract.TASKS[task].terminates_on_success); truncated by max_episode_steps; info["is_success"].
+`randomize` (True, False, "default", "off" or a .toml file) and `servo_params` (a model's name or a
+fit file): as so101.sim_options reads them.
 
 So101VectorEnv steps N worlds in one native call across threads (a gymnasium VectorEnv with
 next-step autoreset), not N processes: what `gym.make_vec(id, num_envs=N)` gives.
@@ -14,6 +16,7 @@ next-step autoreset), not N processes: what `gym.make_vec(id, num_envs=N)` gives
 from __future__ import annotations
 
 import json
+import os
 
 import gymnasium as gym
 import numpy as np
@@ -22,6 +25,7 @@ from gymnasium.vector.utils import batch_space
 
 from .. import contract
 from ..paths import asset
+from ..sim_options import DEFAULT_SERVO_MODEL, randomize_spec, servo_params_spec
 from .spaces import STATE, action_space, checked_action, observation_from_state, observation_space, task_facts
 
 
@@ -46,8 +50,8 @@ class So101InProcessEnv(gym.Env):
         render_size: tuple[int, int] = (240, 320),
         renderer: str = "auto",
         scene: str | None = None,
-        servo_params: str = "sts3215",
-        randomize: str = "off",
+        servo_params: str | os.PathLike = DEFAULT_SERVO_MODEL,
+        randomize: bool | str | os.PathLike = False,
     ):
         import so101_native
 
@@ -64,8 +68,8 @@ class So101InProcessEnv(gym.Env):
             task=task,
             control_rate=control_rate,
             dense_reward=dense_reward,
-            servo_params=servo_params,
-            randomize=randomize,
+            servo_params=servo_params_spec(servo_params),
+            randomize=randomize_spec(randomize),
         )
         rendered = dict(self._cameras)
         if render_mode == "rgb_array":
@@ -128,8 +132,8 @@ class So101VectorEnv(VectorEnv):
         threads: int = 0,
         renderer: str = "auto",
         scene: str | None = None,
-        servo_params: str = "sts3215",
-        randomize: str = "off",
+        servo_params: str | os.PathLike = DEFAULT_SERVO_MODEL,
+        randomize: bool | str | os.PathLike = False,
         **_ignored,
     ):
         import so101_native
@@ -148,8 +152,8 @@ class So101VectorEnv(VectorEnv):
             control_rate=control_rate,
             dense_reward=dense_reward,
             threads=threads,
-            servo_params=servo_params,
-            randomize=randomize,
+            servo_params=servo_params_spec(servo_params),
+            randomize=randomize_spec(randomize),
         )
         if self._cameras:
             self._batch.enable_cameras(list(self._cameras.items()), renderer=renderer)

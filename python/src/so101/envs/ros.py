@@ -29,6 +29,7 @@ import numpy as np
 from .. import contract, process
 from ..messages import joint_positions, rgb_image
 from ..paths import node_binary, node_environment
+from ..sim_options import DEFAULT_SERVO_MODEL, randomize_spec, servo_params_spec
 from ..units import JOINT_NAMES
 from .spaces import action_space, checked_action, observation_from_state, observation_space, task_facts
 
@@ -53,10 +54,12 @@ class So101RosEnv(gym.Env):
         timeout: float = 20.0,
         cameras: dict[str, tuple[int, int]] | None = None,
         dense_reward: bool = False,
-        servo_params: str = "sts3215",
-        randomize: str = "off",
+        servo_params: str | os.PathLike = DEFAULT_SERVO_MODEL,
+        randomize: bool | str | os.PathLike = False,
     ):
-        facts = task_facts(task)  # an unknown task is refused before anything starts
+        # An unknown task or option is refused before anything starts.
+        facts = task_facts(task)
+        servo_params, randomize = servo_params_spec(servo_params), randomize_spec(randomize)
         import rclpy
         from geometry_msgs.msg import PoseStamped
         from rclpy.experimental import EventsExecutor

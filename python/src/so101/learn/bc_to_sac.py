@@ -64,8 +64,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 def sac_arguments(args) -> argparse.Namespace:
     """The sac recipe's defaults, with bc's run settings and --sac-* options in place."""
     parser = argparse.ArgumentParser()
-    sb3_sac.add_parser(parser.add_subparsers(), "sac")
-    sac = parser.parse_args(["sac"])
+    sb3_sac.add_arguments(parser)
+    sac = parser.parse_args([])
     sac.steps = args.continue_with_sac
     sac.n_envs = args.sac_n_envs
     sac.eval_every = args.sac_eval_every

@@ -16,32 +16,53 @@
 
 from __future__ import annotations
 
-import argparse
+import functools
 import sys
 
+from .. import subcommands
+from ..subcommands import Subcommand
 from . import demos, eval_recipe, lerobot_train, sb3_bc, sb3_sac
 
 RECIPES = {
-    "demos": demos,
-    "act": lerobot_train,
-    "diffusion": lerobot_train,
-    "bc": sb3_bc,
-    "sac": sb3_sac,
-    "eval": eval_recipe,
+    "demos": Subcommand(
+        "record N expert demonstrations through the stack and convert them into a LeRobot dataset",
+        demos.add_arguments,
+        demos.run,
+        demos.__doc__,
+    ),
+    **{
+        name: Subcommand(
+            lerobot_train.summary(name),
+            functools.partial(lerobot_train.add_arguments, name=name),
+            lerobot_train.run,
+            lerobot_train.__doc__,
+        )
+        for name in ("act", "diffusion")
+    },
+    "bc": Subcommand(
+        "behaviour cloning (imitation) on in-process expert demonstrations", sb3_bc.add_arguments, sb3_bc.run, sb3_bc.__doc__
+    ),
+    "sac": Subcommand(
+        "SAC (Stable-Baselines3) on the dense reward, success rate over training",
+        sb3_sac.add_arguments,
+        sb3_sac.run,
+        sb3_sac.__doc__,
+    ),
+    "eval": Subcommand(
+        "evaluate a policy (bc, sac or LeRobot) over M seeded episodes",
+        eval_recipe.add_arguments,
+        eval_recipe.run,
+        eval_recipe.__doc__,
+    ),
 }
 
 
-def parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(prog="so101-learn", description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    recipes = p.add_subparsers(dest="recipe", required=True, metavar="RECIPE")
-    for name, module in RECIPES.items():
-        module.add_parser(recipes, name)
-    return p
+def parser():
+    return subcommands.parser("so101-learn", __doc__, RECIPES, metavar="RECIPE", title="recipes")
 
 
 def main(argv: list[str] | None = None) -> int:
-    args = parser().parse_args(argv)
-    return args.run(args)
+    return subcommands.main("so101-learn", __doc__, RECIPES, argv, metavar="RECIPE", title="recipes")
 
 
 if __name__ == "__main__":

@@ -15,6 +15,7 @@ to convert.
 
 from __future__ import annotations
 
+import argparse
 import re
 import shlex
 import subprocess
@@ -24,15 +25,12 @@ from pathlib import Path
 
 from .. import contract
 from ..paths import repo_root
-from .recipe import recipe_parser
+from ..sim_options import DEFAULT_SERVO_MODEL, randomize_argument, servo_params_argument
 
 REPO_ID = "local/so101_demos"
 
 
-def add_parser(recipes, name: str) -> None:
-    p = recipe_parser(
-        recipes, name, "record N expert demonstrations through the stack and convert them into a LeRobot dataset", __doc__
-    )
+def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--episodes", type=int, default=50, help="demonstrations to record")
     p.add_argument("--seed", type=int, default=0, help="seed of the sim's cube placements and the expert's noise")
     p.add_argument("--waypoint-noise", type=float, default=0.005, help="expert: noise on each waypoint's position (m)")
@@ -53,20 +51,26 @@ def add_parser(recipes, name: str) -> None:
         help="the sim's lite scene (no meshes), far faster to render on a CPU; a camera policy trained on it is "
         "evaluated on it too (so101-run-policy --lite, as the recipes do)",
     )
-    p.add_argument("--servo-params", default="sts3215", help="the sim's servo model: sts3215, gain80 or a so101-sysid fit file")
+    p.add_argument(
+        "--servo-params",
+        type=servo_params_argument,
+        default=DEFAULT_SERVO_MODEL,
+        help="the sim's servo model: sts3215, gain80 or a so101-sysid fit file",
+    )
     p.add_argument(
         "--randomize",
+        type=randomize_argument,
         nargs="?",
         const="default",
         default="off",
         metavar="RANGES",
-        help="domain randomization of every episode: the default ranges (assets/randomization.toml) or a .toml",
+        help="domain randomization of every episode: the default ranges (assets/randomization.toml; "
+        "also `true` or `default`), `off`/`false`, or a .toml",
     )
     p.add_argument("--speed", type=float, default=None, help="sim speed (default 8 without cameras, else 4)")
     p.add_argument("--keep-failures", action="store_true", help="keep episodes the expert failed")
     p.add_argument("--repo-id", default=REPO_ID, help="the dataset's repo id")
     p.add_argument("--output", default=None, help="directory for bags/, dataset/ and logs/ (default runs/demos-<time>/)")
-    p.set_defaults(run=run)
 
 
 def launch_command(args, output: Path) -> list[str]:

@@ -17,6 +17,7 @@ Which way depends on POLICY:
 
 from __future__ import annotations
 
+import argparse
 import dataclasses
 import json
 import subprocess
@@ -28,15 +29,13 @@ import numpy as np
 
 from .. import contract
 from ..envs.spaces import reward_mode
-from .recipe import recipe_parser
 from .wrappers import SETTINGS_FILE, EnvSettings
 
 VEC_NORMALIZE_FILE = "vecnormalize.pkl"
 VIDEO_CAMERA = ("front", (240, 320))
 
 
-def add_parser(subparsers, name: str) -> None:
-    p = recipe_parser(subparsers, name, "evaluate a policy (bc, sac or LeRobot) over M seeded episodes", __doc__)
+def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("policy", help="so101-learn bc/sac output (directory or model file), or a LeRobot policy")
     p.add_argument("--eval", type=int, default=50, metavar="M", help="episodes")
     p.add_argument("--seed", type=int, default=1000, help="seed of the first episode (then seed+1, ...)")
@@ -58,7 +57,6 @@ def add_parser(subparsers, name: str) -> None:
     p.add_argument("--backend", choices=["ros", "inprocess"], default="ros", help="LeRobot policies: so101-run-policy's backend")
     p.add_argument("--torch-threads", type=int, default=1, help="torch's CPU threads (bc/sac)")
     p.add_argument("--quiet", action="store_true", help="no progress bar, no per-episode lines")
-    p.set_defaults(run=run)
 
 
 def find_saved(policy: str) -> tuple[dict, Path] | None:

@@ -25,6 +25,7 @@ Why these settings (LeRobot's defaults are sized for images on a GPU: 28 s a ste
 
 from __future__ import annotations
 
+import argparse
 import json
 import os
 import subprocess
@@ -34,7 +35,6 @@ from pathlib import Path
 
 from ..paths import repo_root
 from .eval_recipe import run_policy_command
-from .recipe import recipe_parser
 
 # ACT: every input and the actions by their mean and std (the cube's pose too: its z of ~0.77 m and a
 # quaternion would otherwise dwarf the joints).
@@ -143,14 +143,15 @@ def dataset_cameras(dataset: Path) -> list[str]:
     return [key for key, feature in features.items() if feature.get("dtype") in ("video", "image")]
 
 
-def add_parser(recipes, name: str) -> None:
+def summary(name: str) -> str:
+    """The recipe's line in so101-learn --help."""
+    policy = "ACT" if name == "act" else "Diffusion Policy"
+    return f"train LeRobot's {policy} on the state with lerobot-train (CPU-sized), then evaluate it"
+
+
+def add_arguments(p: argparse.ArgumentParser, name: str) -> None:
+    """The options of the recipe `name` (act or diffusion: PRESETS' keys)."""
     preset = PRESETS[name]
-    p = recipe_parser(
-        recipes,
-        name,
-        f"train LeRobot's {'ACT' if name == 'act' else 'Diffusion Policy'} on the state with lerobot-train (CPU-sized), then evaluate it",
-        __doc__,
-    )
     p.add_argument("--dataset", required=True, help="a LeRobot dataset directory (so101-learn demos, so101-bag-to-lerobot)")
     vision = VISION_LENGTH.get(name)
     with_cameras = f"; {vision['steps']:,} with cameras" if vision else ""
@@ -178,7 +179,7 @@ def add_parser(recipes, name: str) -> None:
     )
     p.add_argument("--eval-videos", type=int, default=10, metavar="K", help="an MP4 of each of the first K episodes")
     p.add_argument("--quiet", action="store_true", help="no progress bars")
-    p.set_defaults(run=run, policy_type=name)
+    p.set_defaults(policy_type=name)
 
 
 def train_command(args, output: Path) -> list[str]:

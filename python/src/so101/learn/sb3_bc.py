@@ -21,6 +21,7 @@ Evaluate again, with videos: so101-learn eval OUTPUT --videos.
 
 from __future__ import annotations
 
+import argparse
 import json
 import time
 import warnings
@@ -31,7 +32,6 @@ from tqdm import tqdm
 
 from ..paths import repo_root
 from . import bc_to_sac
-from .recipe import recipe_parser
 from .wrappers import MAX_STEP, SETTINGS_FILE, EnvSettings, flatten, relative_action
 
 # Floor of the standardization's scale: the cube's height and tilt hardly vary while it rests.
@@ -40,8 +40,7 @@ MIN_SCALE = 0.01
 POLICY_FILE = "policy.pth"
 
 
-def add_parser(subparsers, name: str) -> None:
-    p = recipe_parser(subparsers, name, "behaviour cloning (imitation) on in-process expert demonstrations", __doc__)
+def add_arguments(p: argparse.ArgumentParser) -> None:
     demos = p.add_argument_group("demonstrations")
     demos.add_argument("--demos", type=int, default=100, metavar="N", help="expert episodes to run (failed ones are dropped)")
     demos.add_argument("--waypoint-noise", type=float, default=0.005, help="the expert's waypoint noise (m)")
@@ -65,7 +64,6 @@ def add_parser(subparsers, name: str) -> None:
         "--torch-threads", type=int, default=1, help="torch's CPU threads (small MLPs: 1 is as fast, more stall on busy cores)"
     )
     p.add_argument("--quiet", action="store_true", help="no progress bars")
-    p.set_defaults(run=run)
 
 
 def collect_demonstrations(

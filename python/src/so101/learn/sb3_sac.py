@@ -22,6 +22,7 @@ Evaluate again, with videos: so101-learn eval OUTPUT --videos.
 
 from __future__ import annotations
 
+import argparse
 import csv
 import json
 import shutil
@@ -33,7 +34,6 @@ import numpy as np
 from .. import contract
 from ..paths import repo_root
 from .eval_recipe import VEC_NORMALIZE_FILE
-from .recipe import recipe_parser
 from .wrappers import MAX_STEP, SETTINGS_FILE, EnvSettings
 
 MODEL_FILE = "model.zip"
@@ -44,8 +44,7 @@ DENSE_TASKS = [name for name, task in contract.TASKS.items() if "dense" in task.
 PROGRESS_FIELDS = ["timesteps", "episodes", "successes", "success_rate", "ci95_low", "ci95_high", "mean_reward", "wall_time_s"]
 
 
-def add_parser(subparsers, name: str) -> None:
-    p = recipe_parser(subparsers, name, "SAC (Stable-Baselines3) on the dense reward, success rate over training", __doc__)
+def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--task", choices=DENSE_TASKS, default="touch_cube", help="a task with a dense reward")
     p.add_argument("--steps", type=int, default=50_000, help="environment steps in all (with --resume: the total to reach)")
     p.add_argument("--n-envs", type=int, default=1, help="worlds stepped together (one gradient step per vector step)")
@@ -76,7 +75,6 @@ def add_parser(subparsers, name: str) -> None:
         "--torch-threads", type=int, default=1, help="torch's CPU threads (small MLPs: 1 is as fast, more stall on busy cores)"
     )
     p.add_argument("--quiet", action="store_true", help="no progress bar")
-    p.set_defaults(run=run)
 
 
 # =========================================================================== checkpoints

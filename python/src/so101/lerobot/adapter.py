@@ -12,6 +12,8 @@ lerobot-eval films), at metadata["render_fps"] = fps.
 
 from __future__ import annotations
 
+import os
+
 import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
@@ -19,6 +21,7 @@ from gymnasium import spaces
 from .. import contract
 from ..envs import make_env
 from ..eval_episodes import watchable
+from ..sim_options import DEFAULT_SERVO_MODEL
 from ..units import JOINT_LIMITS, lerobot_from_radians, radians_from_lerobot
 
 
@@ -55,8 +58,8 @@ class So101LeRobotEnv(gym.Env):
         render_size: tuple[int, int] = (96, 128),
         render_mode: str = "rgb_array",
         backend: str = "inprocess",
-        servo_params: str = "sts3215",
-        randomize: str = "off",
+        servo_params: str | os.PathLike = DEFAULT_SERVO_MODEL,
+        randomize: bool | str | os.PathLike = False,
     ):
         self._cameras = {name: tuple(size) for name, size in (cameras or {}).items()}
         self._environment_state = environment_state

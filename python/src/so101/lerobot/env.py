@@ -20,6 +20,7 @@ from lerobot.envs.configs import EnvConfig
 from lerobot.utils.constants import ACTION, OBS_ENV_STATE, OBS_IMAGES, OBS_STATE
 
 from .. import contract
+from ..sim_options import DEFAULT_SERVO_MODEL, randomize_spec, servo_params_spec
 
 PACKAGE = "lerobot_env_so101_sim"
 ENVIRONMENT_STATE_SIZE = 7  # cube position (x y z, m) and orientation (w x y z), world frame
@@ -74,8 +75,9 @@ class So101SimEnvConfig(EnvConfig):
     backend: str = "inprocess"  # "inprocess" (so101_native) or "ros" (so101_sim_node in lockstep)
     render_camera: str = "top"  # the camera of lerobot-eval's videos (render())
     render_size: tuple[int, int] = (96, 128)  # its (height, width) unless it is one of `cameras`
-    servo_params: str = "sts3215"  # the sim's servo model: sts3215, gain80 or a so101-sysid fit file
-    randomize: str = "off"  # domain randomization: off, default (assets/randomization.toml) or a .toml
+    servo_params: str = DEFAULT_SERVO_MODEL  # the sim's servo model: sts3215, gain80 or a so101-sysid fit file
+    # Domain randomization: true or default (assets/randomization.toml), false or off, or a .toml.
+    randomize: str = "off"
 
     def __post_init__(self):
         if self.backend not in ("inprocess", "ros"):
@@ -86,6 +88,9 @@ class So101SimEnvConfig(EnvConfig):
             if name not in contract.CAMERA_NAMES:
                 raise ValueError(f"so101_sim: camera {name!r}, not one of {', '.join(contract.CAMERA_NAMES)}")
         self.cameras = {name: (int(h), int(w)) for name, (h, w) in self.cameras.items()}
+        # `--env.randomize=true` arrives as a string; one spelling from here on (so101.sim_options).
+        self.servo_params = servo_params_spec(self.servo_params)
+        self.randomize = randomize_spec(self.randomize)
         self.features, self.features_map = features_of(self.cameras, self.environment_state)
 
     @property

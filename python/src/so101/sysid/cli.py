@@ -3,29 +3,33 @@ it (compare). See so101.sysid and docs/sim_to_real.md."""
 
 from __future__ import annotations
 
-import argparse
 import sys
 
+from .. import subcommands
+from ..subcommands import Subcommand
 from . import compare, fit, record
 
-
-def parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(prog="so101-sysid", description=__doc__)
-    commands = p.add_subparsers(dest="command", required=True)
-    for name, module, text in (
-        ("record", record, "drive the arm one joint at a time through steps and a chirp, one bag per joint"),
-        ("fit", fit, "fit the servo model per joint to the recording; write a parameter file"),
-        ("compare", compare, "replay recorded episodes in the sim; the tracking gap per joint and at the gripper"),
-    ):
-        sub = commands.add_parser(name, help=text, description=(module.__doc__ or text))
-        module.add_arguments(sub)
-        sub.set_defaults(run=module.run)
-    return p
+COMMANDS = {
+    "record": Subcommand(
+        "drive the arm one joint at a time through steps and a chirp, one bag per joint",
+        record.add_arguments,
+        record.run,
+        record.__doc__,
+    ),
+    "fit": Subcommand(
+        "fit the servo model per joint to the recording; write a parameter file", fit.add_arguments, fit.run, fit.__doc__
+    ),
+    "compare": Subcommand(
+        "replay recorded episodes in the sim; the tracking gap per joint and at the gripper",
+        compare.add_arguments,
+        compare.run,
+        compare.__doc__,
+    ),
+}
 
 
 def main(argv: list[str] | None = None) -> int:
-    args = parser().parse_args(argv)
-    return args.run(args)
+    return subcommands.main("so101-sysid", __doc__, COMMANDS, argv)
 
 
 if __name__ == "__main__":

@@ -13,6 +13,7 @@ import numpy as np
 from .. import contract
 from ..bags import BagError, episode_dirs, read_episode
 from ..envs.inprocess import default_scene
+from ..sim_options import DEFAULT_SERVO_MODEL, servo_params_argument
 
 REPLAY_RATE = 100.0  # control periods per second of the replay
 
@@ -22,8 +23,9 @@ def add_arguments(p) -> None:
     p.add_argument(
         "--servo-params",
         action="append",
+        type=servo_params_argument,
         default=None,
-        help="a servo model to replay with (repeatable): sts3215, gain80 or a parameter file (default: sts3215)",
+        help=f"a servo model to replay with (repeatable): sts3215, gain80 or a parameter file (default: {DEFAULT_SERVO_MODEL})",
     )
     p.add_argument("--tasks", default=None, help="only episodes whose task starts with this")
     p.add_argument("--json", default=None, help="also write the numbers to this file")
@@ -63,7 +65,7 @@ def replay(episode, servo_params: str) -> dict:
 
 
 def run(args) -> int:
-    models = args.servo_params or ["sts3215"]
+    models = args.servo_params or [DEFAULT_SERVO_MODEL]
     results = {}
     for path in episode_dirs([Path(args.bags)]):
         try:

@@ -12,13 +12,19 @@ import numpy as np
 
 from .. import contract
 from ..bags import BagError, episode_dirs, read_episode
+from ..sim_options import DEFAULT_SERVO_MODEL, servo_params_argument
 from .record import HELD_OUT_SUFFIX, TASK_PREFIX
 
 
 def add_arguments(p) -> None:
     p.add_argument("bags", help="the bags of so101-sysid record")
     p.add_argument("--output", required=True, help="the parameter file to write (.json)")
-    p.add_argument("--base", default="sts3215", help="start from these parameters: sts3215 or a parameter file")
+    p.add_argument(
+        "--base",
+        type=servo_params_argument,
+        default=DEFAULT_SERVO_MODEL,
+        help=f"start from these parameters: {DEFAULT_SERVO_MODEL} or a parameter file",
+    )
     p.add_argument("--iterations", type=int, default=400, help="Nelder-Mead iterations per round")
 
 

@@ -18,6 +18,7 @@ from ..isolation import network_namespace_problem
 from ..launch import Launch
 from ..launch_plan import EMULATED_ARM_CALIBRATION, NodeSpec, emulator_spec, lerobot_calibration_file
 from ..paths import asset, isolated_wrapper, node_binary
+from ..sim_options import DEFAULT_SERVO_MODEL, servo_params_argument
 from .excitation import Excitation, held_out
 
 TASK_PREFIX = "so101-sysid "
@@ -38,7 +39,8 @@ def add_arguments(p) -> None:
     )
     arm.add_argument(
         "--emulator-servo-params",
-        default="sts3215",
+        type=servo_params_argument,
+        default=DEFAULT_SERVO_MODEL,
         help="with --emulate: the emulated servos' model, sts3215 or a parameter file (the ground truth of a test)",
     )
     arm.add_argument("--driver-args", default="", help="more so101_feetech_driver flags in one string")

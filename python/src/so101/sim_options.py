@@ -1,0 +1,74 @@
+"""The simulation's options as users write them, turned into the one spelling the simulation takes
+(so101_native's World and WorldBatch, so101_sim_node's --randomize and --servo-params):
+
+  randomize     True or "true" / "default": the default ranges (assets/randomization.toml);
+                False or "false" / "off": none; a path (str or os.PathLike) to a .toml of ranges
+  servo_params  a servo model by name (SERVO_MODELS) or a path to a so101-sysid fit file (.json)
+
+The Gymnasium envs, LeRobot's env type (`--env.randomize=true` arrives as the string "true") and
+the CLIs all normalize here, so each spelling means the same everywhere and anything else is
+refused with the accepted forms before a simulation starts."""
+
+from __future__ import annotations
+
+import argparse
+import os
+from pathlib import Path
+
+# The servo models the simulation knows by name (so101_core::servo::ServoModelChoice).
+SERVO_MODELS = ("sts3215", "gain80")
+DEFAULT_SERVO_MODEL = "sts3215"
+
+RANDOMIZE_OFF = "off"
+RANDOMIZE_DEFAULT = "default"
+_RANDOMIZE_WORDS = {"off": RANDOMIZE_OFF, "false": RANDOMIZE_OFF, "default": RANDOMIZE_DEFAULT, "true": RANDOMIZE_DEFAULT}
+
+
+def randomize_spec(value: object) -> str:
+    """`randomize` as the simulation takes it: "off", "default" or the path of a .toml file."""
+    if isinstance(value, bool):
+        return RANDOMIZE_DEFAULT if value else RANDOMIZE_OFF
+    if isinstance(value, str) and value.strip().lower() in _RANDOMIZE_WORDS:
+        return _RANDOMIZE_WORDS[value.strip().lower()]
+    if isinstance(value, (str, os.PathLike)):
+        return _existing_file(value, None, "randomize", "True, False, 'off', 'default' or a .toml file of ranges")
+    raise TypeError(
+        f"randomize={value!r} ({type(value).__name__}): True, False, 'off', 'default' or the path of a .toml file of ranges"
+    )
+
+
+def servo_params_spec(value: object) -> str:
+    """`servo_params` as the simulation takes it: a model's name or the path of a .json file."""
+    if isinstance(value, str) and value.strip() in SERVO_MODELS:
+        return value.strip()
+    accepted = f"{', '.join(SERVO_MODELS)} or a so101-sysid fit file (.json)"
+    if isinstance(value, (str, os.PathLike)):
+        return _existing_file(value, ".json", "servo_params", accepted)
+    raise TypeError(f"servo_params={value!r} ({type(value).__name__}): {accepted}")
+
+
+def _existing_file(value: str | os.PathLike, suffix: str | None, option: str, accepted: str) -> str:
+    path = Path(os.fspath(value)).expanduser()
+    if suffix and path.suffix != suffix:
+        raise ValueError(f"{option}={os.fspath(value)!r}: {accepted}")
+    if not path.is_file():
+        raise ValueError(f"{option}={os.fspath(value)!r}: no such file ({accepted})")
+    # Absolute: a node started in another directory reads the same file.
+    return str(path.resolve())
+
+
+def randomize_argument(text: str) -> str:
+    """argparse's `type` for --randomize: the error names the accepted forms."""
+    return _argument(randomize_spec, text)
+
+
+def servo_params_argument(text: str) -> str:
+    """argparse's `type` for --servo-params."""
+    return _argument(servo_params_spec, text)
+
+
+def _argument(normalize, text: str) -> str:
+    try:
+        return normalize(text)
+    except (TypeError, ValueError) as error:
+        raise argparse.ArgumentTypeError(str(error)) from None
