@@ -132,7 +132,7 @@ from diagnostic_msgs.msg import DiagnosticArray  # noqa: F401
 from geometry_msgs.msg import PoseStamped  # noqa: F401
 import pytest  # noqa: F401
 from lerobot.datasets.lerobot_dataset import LeRobotDataset  # noqa: F401
-import so101.convert  # noqa: F401
+import so101.dataset.convert  # noqa: F401
 import imitation.algorithms.bc  # noqa: F401  (installed --no-deps: its import chain must be complete)
 import stable_baselines3  # noqa: F401
 from so101.paths import repo_root

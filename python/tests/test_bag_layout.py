@@ -8,7 +8,7 @@ from pathlib import Path
 
 import pytest
 
-from so101.bags import BagError, episode_dirs, mcap_files
+from so101.dataset.bags import BagError, episode_dirs, mcap_files
 from so101.paths import repo_root
 
 

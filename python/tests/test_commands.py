@@ -1,13 +1,13 @@
-"""so101.commands: the rules of so101_core::command (crates/so101_core/src/command.rs), mirrored."""
+"""so101.dataset.commands: the rules of so101_core::command (crates/so101_core/src/command.rs), mirrored."""
 
 import math
 
 import numpy as np
 import pytest
 
-from so101.commands import CommandError, obeyed_targets, targets_from_array, targets_from_joint_state
 from so101.contract import JOINT_LIMITS, JOINT_NAMES
-from so101.resample import gaps, parts_between
+from so101.dataset.commands import CommandError, obeyed_targets, targets_from_array, targets_from_joint_state
+from so101.dataset.resample import gaps, parts_between
 
 
 def test_partial_command_moves_only_named_joints():

@@ -11,7 +11,7 @@ import pytest
 from bag_writer import EpisodeBag
 
 from so101.contract import JOINT_LIMITS
-from so101.convert import main
+from so101.dataset.convert import main
 from so101.units import lerobot_from_radians
 
 FPS = 30

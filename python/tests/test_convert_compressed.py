@@ -14,7 +14,7 @@ import pytest
 from bag_writer import EpisodeBag
 from PIL import Image
 
-from so101.convert import main
+from so101.dataset.convert import main
 
 FPS = 30
 WIDTH, HEIGHT = 40, 32
@@ -83,7 +83,7 @@ def episode(directory, kind: str, end: float = 2.0, damage=None, silent=None, ra
 
 def reference(expected: dict, start: float, count: int) -> dict[str, np.ndarray]:
     """The frames a whole-episode resampling picks: frame j holds each camera's latest frame at or
-    before start + j / FPS (zero-order hold, as so101.resample defines it)."""
+    before start + j / FPS (zero-order hold, as so101.dataset.resample defines it)."""
     out = {}
     for camera in RATES:
         frames = expected[camera]
@@ -130,7 +130,7 @@ def test_corrupt_frames_are_reported_and_only_their_episode_or_part_is_left_out(
     assert summary.startswith("6 episode(s)"), summary
 
 
-# so101.resample: frame 0 is half a frame after every stream has started.
+# so101.dataset.resample: frame 0 is half a frame after every stream has started.
 GRID_OFFSET = 0.5 / FPS
 
 

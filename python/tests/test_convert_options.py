@@ -7,7 +7,7 @@ import argparse
 import numpy as np
 import pytest
 
-from so101.convert import image_size, resized
+from so101.dataset.convert import image_size, resized
 
 
 def test_image_size_reads_width_by_height_and_refuses_nonsense():

@@ -15,9 +15,9 @@ import pandas as pd
 import pytest
 from bag_writer import EpisodeBag
 
-from so101.convert import main as convert_main
-from so101.dataset_check import Finding, check_dataset
-from so101.dataset_check import main as check_main
+from so101.dataset.check import Finding, check_dataset
+from so101.dataset.check import main as check_main
+from so101.dataset.convert import main as convert_main
 
 FPS = 30
 SECONDS = 1.0  # per episode: 31 frames (from half a frame after the start; the last messages held one frame)

@@ -10,7 +10,7 @@ import pytest
 
 import so101  # noqa: F401  (registers the environments)
 from so101.envs import So101InProcessEnv, So101VectorEnv
-from so101.expert import ExpertPolicy
+from so101.evaluate.expert import ExpertPolicy
 
 HOLD = np.array([0.3, -0.2, 0.2, 0.5, 0.0, 0.5], dtype=np.float32)
 

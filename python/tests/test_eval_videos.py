@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from so101.eval_episodes import WATCHABLE_HEIGHT, tile, watchable
+from so101.evaluate.episodes import WATCHABLE_HEIGHT, tile, watchable
 
 
 def test_a_small_camera_is_enlarged_by_whole_repeats_to_a_watchable_height():

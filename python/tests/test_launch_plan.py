@@ -9,8 +9,8 @@ import re
 
 import pytest
 
-from so101 import launch, launch_plan
 from so101.paths import repo_root
+from so101.stack import launch, launch_plan
 
 
 @pytest.fixture
@@ -74,7 +74,7 @@ def test_rviz_opens_the_view_with_the_description_package_on_the_ament_path(bina
     (bin_dir / "rviz2").chmod(0o755)
     monkeypatch.setenv("PATH", str(bin_dir))
     monkeypatch.setenv("AMENT_PREFIX_PATH", "/opt/ros/jazzy")
-    from so101 import description
+    from so101.stack import description
 
     monkeypatch.setattr(description, "install", lambda prefix: description.share_directory(prefix))
     args = launch.parser().parse_args(["--control", "none", "--rviz", "--log-dir", str(tmp_path / "logs")])

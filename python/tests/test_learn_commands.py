@@ -79,7 +79,7 @@ def test_lerobot_train_gets_the_whole_preset_and_extra_arguments_last(recipe, tm
 def test_evaluation_goes_through_the_runner_on_unseen_seeds(tmp_path):
     args = parse("act", "--dataset", str(tmp_path), "--eval", "100")
     command = lerobot_train.eval_command(args, tmp_path / "model", tmp_path / "eval")
-    assert command[command.index("-m") + 1] == "so101.run_policy"
+    assert command[command.index("-m") + 1] == "so101.evaluate.run_policy"
     assert "--eval=100" in command and "--seed=1000" in command and "--backend=ros" in command
     assert "--videos=10" in command
     # Outside a network namespace (as here) the runner is put inside one.

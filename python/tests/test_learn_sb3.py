@@ -255,7 +255,7 @@ def test_lerobot_policies_go_to_so101_run_policy_inside_a_network_namespace(tmp_
     assert eval_recipe.find_saved(str(policy)) is None
     args = cli.parser().parse_args(["eval", str(policy), "--eval", "7", "--seed", "3", "--lite", "--episode-time", "9"])
     command = eval_recipe.lerobot_eval_command(args, "out")
-    assert command[command.index("-m") + 1] == "so101.run_policy" and str(policy) in command
+    assert command[command.index("-m") + 1] == "so101.evaluate.run_policy" and str(policy) in command
     for option in ("--eval=7", "--seed=3", "--output=out", "--backend=ros", "--episode-time=9.0", "--videos=0", "--lite"):
         assert option in command
     # Outside a network namespace (as here) the runner is put inside one.

@@ -10,7 +10,8 @@ import numpy as np
 import pytest
 from lerobot.envs.configs import EnvConfig
 
-from so101 import contract, convert, units
+from so101 import contract, units
+from so101.dataset import convert
 
 
 @dataclass

@@ -1,4 +1,4 @@
-"""so101.process: children stopped the way the nodes expect (SIGINT first, SIGKILL only for one
+"""so101.stack.process: children stopped the way the nodes expect (SIGINT first, SIGKILL only for one
 that ignores it), with their output collected."""
 
 from __future__ import annotations
@@ -7,7 +7,7 @@ import subprocess
 import sys
 import time
 
-from so101 import process
+from so101.stack import process
 
 # A child that reports SIGINT on stdout and exits 0, like the nodes' clean shutdown.
 POLITE = """

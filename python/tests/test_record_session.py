@@ -1,10 +1,10 @@
-"""The timed recording session (so101.record_session): the schedule lerobot-record keeps (episodes
+"""The timed recording session (so101.stack.record_session): the schedule lerobot-record keeps (episodes
 of a fixed length, a reset period between them and none after the last), its keys (right arrow,
 left arrow, Esc) at every phase, and the bytes a terminal sends for them."""
 
 from __future__ import annotations
 
-from so101.record_session import Key, Session, decode_keys
+from so101.stack.record_session import Key, Session, decode_keys
 
 
 def events(actions) -> list[str]:

@@ -1,4 +1,4 @@
-"""The converter's frame grid (so101.resample): a camera at the dataset's rate, its stamps jittered
+"""The converter's frame grid (so101.dataset.resample): a camera at the dataset's rate, its stamps jittered
 as a real camera's are and at epoch times (where float64 resolves 0.2 us), gives one camera frame
 per row, none repeated and none skipped, whichever stream started last."""
 
@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from so101.resample import frame_times, sample_and_hold
+from so101.dataset.resample import frame_times, sample_and_hold
 
 FPS = 30.0
 EPOCH = 1_795_640_370.0

@@ -159,7 +159,7 @@ def test_lerobot_env_type_refuses_a_bad_randomization():
 
 
 def test_so101_run_policy_reads_randomize_as_written(ranges, capsys):
-    from so101.run_policy import parser
+    from so101.evaluate.run_policy import parser
 
     assert parser().parse_args(["P", "--randomize"]).randomize == "default"
     assert parser().parse_args(["P", "--randomize", "true"]).randomize == "default"

@@ -3,7 +3,7 @@ with method="wilson" gives these; written out here, not computed by the code und
 
 import pytest
 
-from so101.stats import wilson_interval
+from so101.evaluate.stats import wilson_interval
 
 
 @pytest.mark.parametrize(

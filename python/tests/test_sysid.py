@@ -9,7 +9,7 @@ from types import SimpleNamespace
 import numpy as np
 
 from so101 import contract
-from so101.bags import Stream, simulation_settings
+from so101.dataset.bags import Stream, simulation_settings
 from so101.sysid.excitation import Excitation, held_out
 from so101.sysid.fit import joint_series, on_the_encoder_grid
 

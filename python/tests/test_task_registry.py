@@ -151,7 +151,7 @@ def test_lerobots_env_type_knows_the_task(task):
 
 @pytest.mark.parametrize("task", TASKS, ids=lambda task: task.name)
 def test_the_commands_offer_the_task(task):
-    from so101 import run_policy
+    from so101.evaluate import run_policy
     from so101.learn import cli, wrappers
 
     assert task.name in choices(run_policy.parser(), "sim_task")
@@ -215,7 +215,7 @@ NOT_OFFERED = [(task.name, mode) for task in TASKS for mode in ("dense", "sparse
 
 @pytest.mark.parametrize(("task", "mode"), NOT_OFFERED)
 def test_run_policy_refuses_a_reward_the_task_does_not_offer(task, mode):
-    from so101 import run_policy
+    from so101.evaluate import run_policy
 
     with pytest.raises(SystemExit, match=f"{task} has no {mode} reward"):
         run_policy.main(["no_such_policy", "--eval", "1", "--sim-task", task, "--reward", mode])

@@ -53,7 +53,7 @@ DIAGNOSTICS_STATUS_NAME = "so101_sim_node"
 
 
 # =========================================================================== namespace guard
-from so101.isolation import network_namespace_problem  # noqa: E402,F401 - re-exported for conftest
+from so101.stack.isolation import network_namespace_problem  # noqa: E402,F401 - re-exported for conftest
 
 
 # =========================================================================== the node process

@@ -4,7 +4,7 @@ that same file, so the driver finds the servos' EPROM as the file says (nothing 
 joints rest mid-range, and /joint_states flow; LeRobot's calibration place (~/.cache/huggingface)
 is never touched.
 
-Runs the launcher of this checkout (python -m so101.launch, the editable package in python/) with the driver
+Runs the launcher of this checkout (python -m so101.stack.launch, the editable package in python/) with the driver
 and emulator binaries of $SO101_BIN_DIR.
 """
 
@@ -47,7 +47,7 @@ def test_emulated_arm_comes_up_from_an_empty_home_with_matching_calibration(ros,
     env.update(HOME=str(home), SO101_BIN_DIR=str(bin_dir), PYTHONPATH=str(REPO_ROOT / "scripts"))
     states = ros.subscribe("/joint_states", JointState, best_effort_qos())
     launcher = subprocess.Popen(
-        [sys.executable, "-m", "so101.launch", "--robot", "real", "--emulate", "--control", "none", "--log-dir", str(logs)],
+        [sys.executable, "-m", "so101.stack.launch", "--robot", "real", "--emulate", "--control", "none", "--log-dir", str(logs)],
         cwd=tmp_path,
         env=env,
         stdout=subprocess.PIPE,

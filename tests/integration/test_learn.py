@@ -91,7 +91,7 @@ def assert_actions_within_the_samplers_clip_range(checkpoint: Path, config: dict
     import torch
     from lerobot.datasets.lerobot_dataset import LeRobotDataset
 
-    from so101.policy import StackPolicy
+    from so101.evaluate.policy import StackPolicy
 
     frames = LeRobotDataset("local/demos", root=dataset).hf_dataset
     batch = {

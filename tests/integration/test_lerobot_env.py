@@ -16,7 +16,7 @@ import numpy as np
 import pytest
 from harness import TINY_ACT, Probe, SimNode, node_binary, stop_nodes, wait_until
 
-from so101.eval_episodes import WATCHABLE_HEIGHT
+from so101.evaluate.episodes import WATCHABLE_HEIGHT
 
 VENV_BIN = Path(sys.executable).parent
 SEED = 3  # the sim's seed while recording: the env reset with it puts the cube where episode 0 had it

@@ -19,7 +19,7 @@ import yaml
 
 import so101  # noqa: F401 - registers the envs
 from so101 import contract
-from so101.expert import ExpertPolicy
+from so101.evaluate.expert import ExpertPolicy
 
 VENV_BIN = Path(sys.executable).parent
 ACTION = np.array([0.3, -0.2, 0.2, 0.5, 0.1, 0.4], dtype=np.float32)

@@ -1,7 +1,7 @@
 //! The episode-bag layout that recorder_node writes and so101_viz and the Python converter read:
 //! one directory per episode, `<prefix>_<index:06>/`, holding rosbag2's `metadata.yaml` and the
 //! MCAP file(s) `<dir name>_<split>.mcap`; the episode's facts in rosbag2's `custom_data`. The
-//! Python reader follows the same rules (python/src/so101/bags.py) and is tested against the same
+//! Python reader follows the same rules (python/src/so101/dataset/bags.py) and is tested against the same
 //! cases (tests/fixtures/episode_bags.txt).
 
 use std::path::{Path, PathBuf};

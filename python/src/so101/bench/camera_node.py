@@ -34,11 +34,12 @@ import tempfile
 import time
 from pathlib import Path
 
-from so101 import contract, process
+from so101 import contract
 from so101.bench import common as bench_common
 from so101.bench.latency import percentile
 from so101.bench.recorder import cpu_seconds
 from so101.paths import asset
+from so101.stack import process
 from so101.subcommands import Subcommand, run_alone
 
 CAMERA = "fake:640x480@30,textured"  # JPEGs of about 54 kB, as a webcam's

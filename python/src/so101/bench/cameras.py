@@ -25,8 +25,9 @@ import subprocess
 import sys
 from pathlib import Path
 
-from so101 import contract, process
+from so101 import contract
 from so101.bench import common as bench_common
+from so101.stack import process
 from so101.subcommands import Subcommand, run_alone
 
 # (label, lite, cameras, size)

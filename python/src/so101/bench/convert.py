@@ -70,7 +70,7 @@ def convert(bags: Path, output: Path) -> dict:
     """Runs the converter in this process with encode_video_frames timed."""
     import lerobot.datasets.dataset_writer as writer
 
-    from so101 import convert as converter
+    from so101.dataset import convert as converter
 
     spent = {"encode": 0.0, "videos": 0}
     original = writer.encode_video_frames

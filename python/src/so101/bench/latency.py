@@ -32,10 +32,10 @@ import time
 
 from so101 import contract
 from so101.contract import JOINT_NAMES
-from so101.isolation import network_namespace_problem
 from so101.paths import node_binary, node_environment, repo_root
-from so101.process import start
-from so101.process import stop as stop_process
+from so101.stack.isolation import network_namespace_problem
+from so101.stack.process import start
+from so101.stack.process import stop as stop_process
 from so101.subcommands import Subcommand, run_alone
 
 

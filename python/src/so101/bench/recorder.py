@@ -26,8 +26,9 @@ import tempfile
 import time
 from pathlib import Path
 
-from so101 import contract, process
+from so101 import contract
 from so101.paths import node_environment
+from so101.stack import process
 from so101.subcommands import Subcommand, run_alone
 
 CLOCK_TICKS = os.sysconf("SC_CLK_TCK")

@@ -21,9 +21,9 @@ import sys
 import tempfile
 from pathlib import Path
 
-from so101 import process
 from so101.bench import common as bench_common
 from so101.paths import asset
+from so101.stack import process
 from so101.subcommands import Subcommand, run_alone
 
 

@@ -4,7 +4,7 @@
 1. Recording: for each JPEG quality, so101_sim_node (meshes unless --lite; top, front, wrist at
    --size and 30 Hz; --speed 4 as so101-launch runs the expert; --jpeg --jpeg-quality Q) with the
    scripted expert, and two recorder_nodes on the same episodes: recorder_node's default set (raw
-   sensor_msgs/Image) and so101-launch's default (so101.launch_plan.COMPRESSED_RECORDING: the cameras'
+   sensor_msgs/Image) and so101-launch's default (so101.stack.launch_plan.COMPRESSED_RECORDING: the cameras'
    image_raw/compressed). Per layout, MB of bag per second of robot time (bag bytes over the sim-time
    span of /joint_states); per quality, the PSNR of every JPEG frame against the raw frame of the same
    camera and stamp (the raw render): over all frames (from the mean squared error) and the worst frame.
@@ -38,7 +38,7 @@ import yaml
 
 from so101 import contract
 from so101.bench import common as bench_common
-from so101.launch_plan import COMPRESSED_RECORDING, DEFAULT_JPEG_QUALITY
+from so101.stack.launch_plan import COMPRESSED_RECORDING, DEFAULT_JPEG_QUALITY
 from so101.subcommands import Subcommand, run_alone
 
 CAMERAS = contract.CAMERA_NAMES
@@ -144,7 +144,7 @@ def convert(bags: Path, output: Path, pythonpath: str | None = None) -> dict:
     env = dict(os.environ)
     if pythonpath:
         env["PYTHONPATH"] = pythonpath
-    command = [sys.executable, "-m", "so101.convert", str(bags), "--output", str(output), "--quiet"]
+    command = [sys.executable, "-m", "so101.dataset.convert", str(bags), "--output", str(output), "--quiet"]
     started = time.monotonic()
     child = subprocess.Popen(command, env=env, stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True)
     process = psutil.Process(child.pid)

@@ -26,10 +26,11 @@ import uuid
 import gymnasium as gym
 import numpy as np
 
-from .. import contract, process
+from .. import contract
 from ..messages import joint_positions, rgb_image
 from ..paths import node_binary, node_environment
 from ..sim_options import DEFAULT_SERVO_MODEL, randomize_spec, servo_params_spec
+from ..stack import process
 from ..units import JOINT_NAMES
 from .spaces import action_space, checked_action, observation_from_state, observation_space, task_facts
 

@@ -80,7 +80,7 @@ def launch_command(args, output: Path) -> list[str]:
     return [
         sys.executable,
         "-m",
-        "so101.launch",
+        "so101.stack.launch",
         "--robot=sim",
         "--control=expert",
         f"--episodes={args.episodes}",
@@ -97,7 +97,7 @@ def launch_command(args, output: Path) -> list[str]:
 
 
 def convert_command(args, output: Path) -> list[str]:
-    command = [sys.executable, "-m", "so101.convert", str(output / "bags"), "--output", str(output / "dataset")]
+    command = [sys.executable, "-m", "so101.dataset.convert", str(output / "bags"), "--output", str(output / "dataset")]
     command += ["--repo-id", args.repo_id]
     if args.no_environment_state:
         command.append("--no-environment-state")

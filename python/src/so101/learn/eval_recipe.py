@@ -1,7 +1,7 @@
 """so101-learn eval POLICY: evaluate a policy over M seeded episodes: success rate with its 95 %
 interval, mean and best reward, eval_info.json (and MP4s) in --output. The recipes evaluate
 through it too: bc its saved policy (evaluate_saved), act and diffusion theirs through
-so101-run-policy (run_policy_command). The episodes and the report are so101.eval_episodes'.
+so101-run-policy (run_policy_command). The episodes and the report are so101.evaluate.episodes'.
 
 Which way depends on POLICY:
   - a policy of `so101-learn bc` or `sac` (its output directory, which holds so101_learn.json, a
@@ -117,7 +117,7 @@ def evaluate_saved(
     quiet: bool = False,
 ) -> dict:
     """Evaluates a bc/sac policy in-process; writes output/eval_info.json, returns the summary."""
-    from ..eval_episodes import run_episodes, summarize, write_report
+    from ..evaluate.episodes import run_episodes, summarize, write_report
 
     found = find_saved(str(policy))
     if found is None:
@@ -174,9 +174,9 @@ def run_policy_command(
     """so101-run-policy's evaluation of a LeRobot policy (every recipe evaluates through it), inside
     scripts/isolated when this process is not in a private network namespace already. `videos`:
     how many episodes are filmed (None: so101-run-policy's default, every one)."""
-    from ..isolation import isolated_command
+    from ..stack.isolation import isolated_command
 
-    command = [sys.executable, "-m", "so101.run_policy", policy, f"--eval={episodes}", f"--seed={seed}"]
+    command = [sys.executable, "-m", "so101.evaluate.run_policy", policy, f"--eval={episodes}", f"--seed={seed}"]
     command += [f"--output={output}", f"--backend={backend}", f"--sim-task={sim_task or 'cube_to_bin'}"]
     if episode_time:
         command.append(f"--episode-time={episode_time}")

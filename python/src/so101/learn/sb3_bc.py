@@ -1,7 +1,7 @@
 """so101-learn bc: behaviour cloning with `imitation` (imitation.algorithms.bc.BC, an SB3 MLP
 policy) on demonstrations of the scripted expert, all in-process, then an evaluation.
 
-1. demonstrations: --demos seeded cube_to_bin episodes of so101.expert.ExpertPolicy (with
+1. demonstrations: --demos seeded cube_to_bin episodes of so101.evaluate.expert.ExpertPolicy (with
    --waypoint-noise / --action-noise, so the demonstrations cover some states off the ideal path),
    stepped through the learning wrappers (so101.learn.wrappers: flat observation, relative actions
    of at most --max-step rad per period); the expert's targets become relative actions. Failed
@@ -75,7 +75,7 @@ def collect_demonstrations(
     to the demonstrations' mean and standard deviation."""
     from imitation.data.types import TransitionsWithRew
 
-    from ..expert import ExpertPolicy
+    from ..evaluate.expert import ExpertPolicy
 
     env = settings.make(flat=False)
     expert = ExpertPolicy(waypoint_noise=waypoint_noise, action_noise=action_noise, seed=seed)

@@ -102,8 +102,8 @@ def save_checkpoint(model, output: Path, wall_time: float) -> Path:
 # =========================================================================== evaluation
 def evaluate_model(model, settings: EnvSettings, env, episodes: int, seed: int) -> dict:
     """The current policy over `episodes` seeded episodes (deterministic): a progress.csv row."""
-    from ..eval_episodes import run_episodes
-    from ..stats import wilson_interval
+    from ..evaluate.episodes import run_episodes
+    from ..evaluate.stats import wilson_interval
 
     normalizer = model.get_vec_normalize_env()
 

@@ -141,7 +141,7 @@ class EnvSettings:
 
     def make(self, flat: bool = True, cameras: dict[str, tuple[int, int]] | None = None, lite: bool = True) -> gym.Env:
         """The in-process env with relative actions; `flat`: the flat observation and a TimeLimit
-        (for SB3); otherwise the dict observation (pixels included), for so101.eval_episodes."""
+        (for SB3); otherwise the dict observation (pixels included), for so101.evaluate.episodes."""
         env = make_env(self.task, lite=lite, cameras=cameras, dense_reward=self.dense_reward)
         env = RelativeJointTargets(env, self.max_step)
         if self.elapsed_time:

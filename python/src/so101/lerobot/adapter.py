@@ -20,7 +20,7 @@ from gymnasium import spaces
 
 from .. import contract
 from ..envs import make_env
-from ..eval_episodes import watchable
+from ..evaluate.episodes import watchable
 from ..sim_options import DEFAULT_SERVO_MODEL
 from ..units import JOINT_LIMITS, lerobot_from_radians, radians_from_lerobot
 

@@ -11,7 +11,7 @@ from pathlib import Path
 import numpy as np
 
 from .. import contract
-from ..bags import BagError, episode_dirs, read_episode
+from ..dataset.bags import BagError, episode_dirs, read_episode
 from ..envs.inprocess import default_scene
 from ..sim_options import DEFAULT_SERVO_MODEL, servo_params_argument
 

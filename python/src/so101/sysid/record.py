@@ -14,11 +14,11 @@ from pathlib import Path
 import numpy as np
 
 from .. import contract
-from ..isolation import network_namespace_problem
-from ..launch import Launch
-from ..launch_plan import EMULATED_ARM_CALIBRATION, NodeSpec, emulator_spec, lerobot_calibration_file
 from ..paths import asset, isolated_wrapper, node_binary
 from ..sim_options import DEFAULT_SERVO_MODEL, servo_params_argument
+from ..stack.isolation import network_namespace_problem
+from ..stack.launch import Launch
+from ..stack.launch_plan import EMULATED_ARM_CALIBRATION, NodeSpec, emulator_spec, lerobot_calibration_file
 from .excitation import Excitation, held_out
 
 TASK_PREFIX = "so101-sysid "

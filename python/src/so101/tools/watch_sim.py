@@ -17,9 +17,10 @@ from rclpy.node import Node
 from sensor_msgs.msg import Image, JointState
 from std_msgs.msg import Bool, Float64
 
-from so101 import contract, process
+from so101 import contract
 from so101.contract import CAMERA_NAMES
 from so101.paths import node_environment
+from so101.stack import process
 
 CAMERAS = CAMERA_NAMES
 SHORT_NAMES = {

@@ -53,6 +53,6 @@ def isolated_command(command: list[str]) -> list[str]:
     namespace, else behind scripts/isolated (which makes one for it)."""
     if network_namespace_problem() is None:
         return command
-    from .paths import isolated_wrapper
+    from ..paths import isolated_wrapper
 
     return [str(isolated_wrapper()), *command]

@@ -1,5 +1,5 @@
 """so101-launch's plan: which processes a profile starts, with their command lines, in start order.
-Pure (no process is started): so101.launch runs the plan."""
+Pure (no process is started): so101.stack.launch runs the plan."""
 
 from __future__ import annotations
 
@@ -10,8 +10,8 @@ import sys
 from dataclasses import dataclass
 from pathlib import Path
 
-from . import contract
-from .paths import asset, node_binary
+from .. import contract
+from ..paths import asset, node_binary
 
 # The arm `--robot real --emulate` emulates unless the user names a calibration.
 EMULATED_ARM_CALIBRATION = "emulated_arm/so101_calibration.json"  # under assets/

@@ -3,7 +3,7 @@ through LeRobot's own LeRobotDataset API.
 
 Per frame (docs/lerobot.md): observation.state (the arm's /joint_states), action (the target
 the robot obeyed: /joint_commands and /forward_position_controller/commands validated, clamped and
-merged as the nodes do, so101.commands), observation.environment_state (the cube's pose from /cube/pose: x y z
+merged as the nodes do, so101.dataset.commands), observation.environment_state (the cube's pose from /cube/pose: x y z
 in m and the orientation quaternion w x y z, world frame; --no-environment-state leaves it out),
 observation.images.<camera> (video), next.reward, next.success, and the episode's task. Units are LeRobot's SO-101 conventions (degrees, gripper 0-100) unless
 --units radians. An episode that cannot be converted faithfully (cut short, unreadable, a stream
@@ -28,16 +28,16 @@ from pathlib import Path
 
 import numpy as np
 
-from . import contract
+from .. import contract
+from ..messages import rgb_image
+from ..units import FEATURE_NAMES, lerobot_from_radians
 from .bags import BagError, Episode, camera_frames, episode_dirs, read_episode
-from .messages import rgb_image
 from .resample import frame_times, gaps, parts_between, sample_and_hold
-from .units import FEATURE_NAMES, lerobot_from_radians
 
 ROBOT_TYPE = "so_follower"
 # The fewest frames an episode (or a part of one split at a gap) needs to be kept.
 MIN_FRAMES = 2
-log = logging.getLogger("so101.convert")
+log = logging.getLogger("so101.dataset.convert")
 
 
 @dataclass
@@ -53,7 +53,7 @@ class Frames:
 
 
 def frames_of(episode: Episode, fps: float, units: str, environment_state: bool = True) -> Frames:
-    """Resamples an episode onto the fps grid (alignment: so101.resample). With
+    """Resamples an episode onto the fps grid (alignment: so101.dataset.resample). With
     `environment_state`, the cube's pose (/cube/pose) of each frame too; an episode without it is
     a BagError then."""
     if environment_state and not episode.cube_pose.times:
@@ -405,8 +405,8 @@ def convert(args) -> int:
     for reason in skipped:
         print(f"  skipped: {reason}")
     if dataset is not None and not args.no_check:
-        # What LeRobot will read, checked once it is all on disk (so101.dataset_check).
-        from .dataset_check import run as check_dataset
+        # What LeRobot will read, checked once it is all on disk (so101.dataset.check).
+        from .check import run as check_dataset
 
         sys.stdout.flush()
         check_status = check_dataset(args.output, quiet=args.quiet)

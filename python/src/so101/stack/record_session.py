@@ -189,7 +189,7 @@ class SessionRunner:
 
         from std_srvs.srv import Trigger
 
-        from . import contract
+        from .. import contract
 
         self.node, self.session, self.keys = node, session, keys
         self.clock = clock or time.monotonic

@@ -53,11 +53,12 @@ import time
 from dataclasses import dataclass
 from pathlib import Path
 
-from . import contract, record_session
+from .. import contract
+from ..paths import isolated_wrapper, node_environment
 from . import process as processes
+from . import record_session
 from .isolation import network_namespace_problem
 from .launch_plan import DEFAULT_JPEG_QUALITY, NodeSpec, check_session, plan
-from .paths import isolated_wrapper, node_environment
 
 
 @dataclass
@@ -326,7 +327,7 @@ def main(argv: list[str] | None = None) -> int:
     if not args.host_network and network_namespace_problem():
         # Re-run inside a private network namespace; every node inherits it.
         isolated = str(isolated_wrapper())
-        os.execv(isolated, [isolated, sys.executable, "-m", "so101.launch", *argv])
+        os.execv(isolated, [isolated, sys.executable, "-m", "so101.stack.launch", *argv])
     if args.speed is None and args.robot == "sim" and args.control == "expert":
         args.speed = "4"  # every camera frame rendered; as fast as the renderer allows, up to 4x
     args.log_dir = args.log_dir or f"logs/launch-{time.strftime('%Y%m%d-%H%M%S')}"

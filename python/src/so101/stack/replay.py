@@ -14,9 +14,9 @@ from pathlib import Path
 
 import numpy as np
 
-from . import contract
+from .. import contract
+from ..units import JOINT_NAMES, radians_from_lerobot
 from .rclpy_wait import spin_until
-from .units import JOINT_NAMES, radians_from_lerobot
 
 
 def actions_from_dataset(root: Path, repo_id: str, episode: int, units: str) -> tuple[np.ndarray, np.ndarray]:
@@ -35,7 +35,7 @@ def actions_from_dataset(root: Path, repo_id: str, episode: int, units: str) -> 
 
 def actions_from_bag(path: Path) -> tuple[np.ndarray, np.ndarray]:
     """(seconds from the first command, commands in radians [N, 6]) of an episode bag."""
-    from .bags import BagError, read_episode
+    from ..dataset.bags import BagError, read_episode
 
     try:
         episode = read_episode(path, cameras=[])

@@ -23,9 +23,9 @@ from pathlib import Path
 import numpy as np
 import yaml
 
-from . import contract
+from .. import contract
+from ..messages import cube_pose_vector, image_size, joint_positions
 from .commands import CommandError, obeyed_targets, targets_from_array, targets_from_joint_state
-from .messages import cube_pose_vector, image_size, joint_positions
 
 log = logging.getLogger(__name__)
 
@@ -71,7 +71,7 @@ class Episode:
     camera_topics: dict[str, str] = field(default_factory=dict)
     # The episode's MCAP files, in the order they are read.
     files: list[Path] = field(default_factory=list)
-    # Command messages the nodes would have rejected (so101.commands), with the first reasons.
+    # Command messages the nodes would have rejected (so101.dataset.commands), with the first reasons.
     rejected_commands: int = 0
     rejection_reasons: list[str] = field(default_factory=list)
     # What the sim simulated the episode with (/sim/episode: servo model, randomization and its
@@ -266,7 +266,7 @@ def read_episode(path: Path, cameras: list[str] | None) -> Episode:
         times = [t for t, _ in pairs] if stamped else list(to_sim([t for t, _ in pairs]))
         return Stream(times=times, values=[v for _, v in pairs])
 
-    # The robot held its measured position until the first command (so101.commands).
+    # The robot held its measured position until the first command (so101.dataset.commands).
     raw_states.sort(key=lambda entry: entry[1])
     first_command = float(to_sim([accepted[0][0]])[0])
     held = [p for _, s, p in raw_states if s <= first_command + 1e-9] or [raw_states[0][2]]

@@ -1,5 +1,5 @@
 """Seeded evaluation episodes on a Gymnasium env of the stack (so101.envs, either backend) and
-their report, whatever the policy: success rate with its 95 % interval (so101.stats), mean and
+their report, whatever the policy: success rate with its 95 % interval (so101.evaluate.stats), mean and
 best reward, an MP4 per episode and eval_info.json. so101-run-policy --eval (LeRobot policies) and
 so101-learn's evaluations of Stable-Baselines3 / imitation policies (so101.learn.eval_recipe,
 so101.learn.sb3_sac) all run their episodes here, so their reports read the same.

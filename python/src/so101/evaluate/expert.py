@@ -18,7 +18,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from . import contract
+from .. import contract
 
 
 class ExpertPolicy:

@@ -11,10 +11,10 @@ from pathlib import Path
 
 import numpy as np
 
-from .units import lerobot_from_radians, radians_from_lerobot
+from ..units import lerobot_from_radians, radians_from_lerobot
 
 STATE = "observation.state"
-ENVIRONMENT_STATE = "observation.environment_state"  # the cube's pose (so101.convert)
+ENVIRONMENT_STATE = "observation.environment_state"  # the cube's pose (so101.dataset.convert)
 ENVIRONMENT_STATE_SIZE = 7
 IMAGE_PREFIX = "observation.images."
 log = logging.getLogger(__name__)

@@ -15,7 +15,7 @@ import subprocess
 import sys
 from pathlib import Path
 
-from .paths import asset, node_binary
+from ..paths import asset, node_binary
 
 PACKAGE = "so101_description"
 RVIZ_CONFIG = "rviz/so101.rviz"  # under assets/ and under the package's share directory

@@ -22,7 +22,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .units import JOINT_LIMITS, JOINT_NAMES
+from ..units import JOINT_LIMITS, JOINT_NAMES
 
 JOINT_COUNT = len(JOINT_NAMES)
 

@@ -23,13 +23,13 @@ from pathlib import Path
 
 import numpy as np
 
-from . import contract
-from .envs.spaces import reward_mode
-from .messages import cube_pose_vector, joint_positions, rgb_image
+from .. import contract
+from ..envs.spaces import reward_mode
+from ..messages import cube_pose_vector, joint_positions, rgb_image
+from ..sim_options import DEFAULT_SERVO_MODEL, randomize_argument, servo_params_argument
+from ..stack.rclpy_wait import spin_until
+from ..units import JOINT_LIMITS, JOINT_NAMES
 from .policy import PolicyError, StackPolicy
-from .rclpy_wait import spin_until
-from .sim_options import DEFAULT_SERVO_MODEL, randomize_argument, servo_params_argument
-from .units import JOINT_LIMITS, JOINT_NAMES
 
 log = logging.getLogger("so101-run-policy")
 
@@ -166,8 +166,8 @@ def run_live(args, policy: StackPolicy) -> int:
 
 # =========================================================================== evaluation
 def evaluate(args, policy: StackPolicy) -> int:
-    from .envs import make_env
-    from .eval_episodes import run_episodes, summarize, write_report
+    from ..envs import make_env
+    from .episodes import run_episodes, summarize, write_report
 
     cameras = {camera.name: (camera.height, camera.width) for camera in policy.cameras}
     # The video shows the policy's cameras, or --video-camera; a policy without cameras is filmed
