@@ -256,8 +256,8 @@ def test_the_description_package_resolves_every_mesh_uri_and_rviz_view(tmp_path,
     from ament_index_python.packages import get_package_share_directory
 
     from so101 import contract
-    from so101.stack import description
     from so101.paths import asset
+    from so101.stack import description
 
     prefix = tmp_path / "prefix"
     done = subprocess.run(
