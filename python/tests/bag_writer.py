@@ -142,14 +142,22 @@ class EpisodeBag:
     def success(self, t: float, value: bool) -> None:
         self.add(t, "/" + contract.TASK_SUCCESS, "std_msgs/msg/Bool", {"data": bool(value)})
 
-    def close(self, task: str = "put the cube in the bin", success: bool | None = True, metadata: str | None = None) -> Path:
-        """Writes <directory>/<name>_0.mcap and metadata.yaml (`metadata`: its text instead)."""
+    def close(
+        self,
+        task: str = "put the cube in the bin",
+        success: bool | None = True,
+        metadata: str | None = None,
+        closed: bool = True,
+        chunk_size: int = 1024 * 1024,
+    ) -> Path:
+        """Writes <directory>/<name>_0.mcap (in chunks of about `chunk_size` bytes) and
+        metadata.yaml (`metadata`: its text instead; none unless `closed`: a recorder killed)."""
         self.directory.mkdir(parents=True, exist_ok=True)
         file_name = f"{self.directory.name}_0.mcap"
         messages = sorted(self.messages, key=lambda m: m[0])
         counts: dict[tuple[str, str], int] = {}
         with open(self.directory / file_name, "wb") as stream:
-            writer = Writer(stream)
+            writer = Writer(stream, chunk_size=chunk_size)
             schemas = {}
             for t, topic, type_name, message in messages:
                 if type_name not in schemas:
@@ -157,6 +165,8 @@ class EpisodeBag:
                 writer.write_message(topic, schemas[type_name], message, log_time=int(round((WALL_OFFSET + t) * 1e9)))
                 counts[(topic, type_name)] = counts.get((topic, type_name), 0) + 1
             writer.finish()
+        if not closed:
+            return self.directory
         if metadata is None:
             metadata = metadata_yaml(self.directory, file_name, messages, counts, task, success)
         (self.directory / contract.EPISODE_METADATA_FILE).write_text(metadata)

@@ -17,7 +17,7 @@ from __future__ import annotations
 import json
 import logging
 from collections.abc import Iterator
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -77,6 +77,9 @@ class Episode:
     # What the sim simulated the episode with (/sim/episode: servo model, randomization and its
     # draw); None on the real arm or for a bag without it.
     simulation: dict | None = None
+    # What was recovered rather than read as recorded: a recording cut short (no metadata.yaml),
+    # a file cut short (read up to the cut).
+    notes: list[str] = field(default_factory=list)
 
 
 def _split_number(path: Path) -> int | None:
@@ -119,22 +122,76 @@ def _stamp(header) -> float:
     return header.stamp.sec + header.stamp.nanosec * 1e-9
 
 
-def _messages(files: list[Path]) -> Iterator[tuple[Path, str, object, object]]:
+# The first bytes of every MCAP file.
+MCAP_MAGIC = b"\x89MCAP0\r\n"
+
+
+@dataclass
+class ReadReport:
+    """What a read of an episode's files met besides the messages: files cut short (what preceded
+    the cut was read) and every topic found, with its encoding (to name a foreign recording)."""
+
+    notes: list[str] = field(default_factory=list)
+    topics: dict[str, str] = field(default_factory=dict)
+
+    def foreign_topics(self) -> str:
+        """The topics found, for the reason an episode lacks what the converter reads."""
+        if not self.topics:
+            return "its files hold no message"
+        found = sorted(self.topics.items())
+        listed = ", ".join(f"{topic} ({encoding})" for topic, encoding in found[:6])
+        more = f" and {len(found) - 6} more" if len(found) > 6 else ""
+        return f"its files hold {listed}{more}"
+
+
+def _messages(files: list[Path], report: ReadReport | None = None) -> Iterator[tuple[Path, str, object, object]]:
     """(file, topic, MCAP message record, decode) of every message of `files`, file after file, each in
     log-time order when the file is indexed (a heap over its chunks: one chunk or so in memory) and
     in stored order when it is not (ordering an unindexed file would load it whole); `decode(record)`
-    gives the ROS message. Both passes of an episode read it so, in the same order."""
-    from mcap.reader import make_reader
+    gives the ROS message. Both passes of an episode read it so, in the same order.
+    A file cut short (a recorder killed mid-write: no summary, a record cut in the middle) is read
+    in stored order up to the cut, each of its complete chunks whole; the cut is noted in `report`.
+    A file that is no MCAP at all is a BagError."""
+    from mcap.reader import NonSeekingReader, make_reader
     from mcap_ros2.decoder import DecoderFactory
 
     for file in files:
         with open(file, "rb") as stream:
-            reader = make_reader(stream)
-            summary = reader.get_summary()
+            start = stream.read(len(MCAP_MAGIC))
+            if start != MCAP_MAGIC:
+                raise BagError(f"{file.parent.name}: {file.name} is not an MCAP file (it starts with {start!r})")
+            stream.seek(0)
+            try:
+                summary = make_reader(stream).get_summary()
+            except Exception:  # noqa: BLE001 - no readable summary: the file is read as a stream
+                summary = None
             indexed = summary is not None and len(summary.chunk_indexes) > 0
+            stream.seek(0)
+            if indexed:
+                records = make_reader(stream).iter_messages(log_time_order=True)
+            else:
+                records = NonSeekingReader(stream).iter_messages(log_time_order=False)
             factory = DecoderFactory()  # per file: schema ids are the file's own
             decoders: dict[int, object] = {}
-            for schema, channel, record in reader.iter_messages(log_time_order=indexed):
+            read = 0
+            while True:
+                try:
+                    schema, channel, record = next(records)
+                except StopIteration:
+                    break
+                except Exception as error:
+                    if indexed:
+                        raise
+                    if report is not None:
+                        report.notes.append(
+                            f"{file.parent.name}: {file.name} is cut short after {read} message(s) "
+                            f"({' '.join(str(error).split()) or type(error).__name__}); what precedes the cut is read"
+                        )
+                    break
+                read += 1
+                if report is not None and channel.topic not in report.topics:
+                    schema_encoding = schema.encoding if schema is not None else "no schema"
+                    report.topics[channel.topic] = f"{channel.message_encoding or 'no encoding'}, {schema_encoding}"
                 decoder = decoders.get(channel.id)
                 if decoder is None:
                     decoder = factory.decoder_for(channel.message_encoding, schema)
@@ -157,13 +214,37 @@ def camera_of(topic: str) -> tuple[str, bool] | None:
 
 def read_episode(path: Path, cameras: list[str] | None) -> Episode:
     """Everything of one episode the converter uses, in sim time, camera frames as FrameRefs
-    (camera_frames decodes them). Raises BagError for an episode that was not closed (no
-    metadata.yaml: the recorder was killed), an unreadable file, one that misses a stream, or a
+    (camera_frames decodes them). An episode that was not closed (no metadata.yaml: the recorder
+    was killed) is read from its MCAP files, each up to where it was cut, its task and verdict
+    unknown (Episode.notes says so). Raises BagError for malformed metadata, a file that is no
+    MCAP or cannot be read, one that misses a stream (naming the topics it holds instead), or a
     camera frame that cannot be decoded (an unknown encoding or format, data that is no image) or
     that changes size."""
     metadata_file = path / contract.EPISODE_METADATA_FILE
-    if not metadata_file.is_file():
-        raise BagError(f"{path.name}: no metadata.yaml (the recording was cut short); its bag may be truncated")
+    report = ReadReport()
+    if metadata_file.is_file():
+        custom, files = _metadata(path, metadata_file)
+    else:
+        custom, files = {}, mcap_files(path) if path.is_dir() else []
+        if not files:
+            raise BagError(f"{path.name}: no metadata.yaml and no MCAP file")
+        report.notes.append(
+            f"{path.name}: no metadata.yaml (the recording was cut short): read from "
+            f"{', '.join(file.name for file in files)}; its task and verdict are unknown"
+        )
+    episode = _read_files(path, files, cameras, report)
+    success_text = str(custom.get(contract.CUSTOM_SUCCESS, "")).lower()
+    return replace(
+        episode,
+        task=str(custom.get(contract.CUSTOM_TASK) or ""),
+        success={"true": True, "false": False}.get(success_text),
+        seed=str(custom.get(contract.CUSTOM_SEED, "")),
+        simulation=simulation_settings(path, custom),
+    )
+
+
+def _metadata(path: Path, metadata_file: Path) -> tuple[dict, list[Path]]:
+    """(custom_data, the MCAP files it lists) of a closed episode's metadata.yaml."""
     try:
         info = yaml.safe_load(metadata_file.read_text())["rosbag2_bagfile_information"]
     except Exception as error:  # noqa: BLE001 - any malformed file is reported the same way
@@ -181,6 +262,11 @@ def read_episode(path: Path, cameras: list[str] | None) -> Episode:
     files = [path / entry for entry in relative]
     if not files or not all(f.is_file() for f in files):
         raise BagError(f"{path.name}: metadata.yaml lists files that are missing: {files}")
+    return custom, files
+
+
+def _read_files(path: Path, files: list[Path], cameras: list[str] | None, report: ReadReport) -> Episode:
+    """The episode's streams out of `files` (read_episode's first pass), without its metadata."""
 
     raw_states: list[tuple[float, float, np.ndarray]] = []  # (receive time, stamp, positions)
     # (receive time, topic order, targets or the reason the nodes reject the message)
@@ -192,7 +278,7 @@ def read_episode(path: Path, cameras: list[str] | None) -> Episode:
     raw_images: dict[str, list[tuple[float, FrameRef]]] = {}
     file = files[0]  # the one being read, for the error message
     try:
-        for in_file, topic, record, decode in _messages(files):
+        for in_file, topic, record, decode in _messages(files, report):
             file = in_file
             received = record.log_time * 1e-9
             camera = camera_of(topic)
@@ -241,14 +327,15 @@ def read_episode(path: Path, cameras: list[str] | None) -> Episode:
     except Exception as error:  # noqa: BLE001 - a damaged file is reported, not fatal
         raise BagError(f"{path.name}: cannot read {file.name} ({type(error).__name__}: {error})") from error
 
+    cut = "".join(f"; {note.removeprefix(path.name + ': ')}" for note in report.notes)
     if len(raw_states) < 2:
-        raise BagError(f"{path.name}: no /joint_states (observation.state)")
+        raise BagError(f"{path.name}: no /joint_states (observation.state); {report.foreign_topics()}{cut}")
     raw_commands.sort(key=lambda entry: (entry[0], entry[1]))
     accepted = [(t, c) for t, _, c in raw_commands if not isinstance(c, str)]
     reasons = [c for _, _, c in raw_commands if isinstance(c, str)]
     if not accepted:
         detail = f" ({len(reasons)} rejected, e.g. {reasons[0]})" if reasons else ""
-        raise BagError(f"{path.name}: no valid /joint_commands or /forward_position_controller/commands (action){detail}")
+        raise BagError(f"{path.name}: no valid /joint_commands or /forward_position_controller/commands (action){detail}{cut}")
     # One topic per camera: the raw one where a camera was recorded both ways (lossless).
     camera_topics: dict[str, str] = {}
     for topic in sorted(raw_images, key=lambda topic: camera_of(topic)[1]):
@@ -272,12 +359,11 @@ def read_episode(path: Path, cameras: list[str] | None) -> Episode:
     held = [p for _, s, p in raw_states if s <= first_command + 1e-9] or [raw_states[0][2]]
     targets = obeyed_targets([c for _, c in accepted], held[-1])
 
-    success_text = str(custom.get(contract.CUSTOM_SUCCESS, "")).lower()
     return Episode(
         path=path,
-        task=str(custom.get(contract.CUSTOM_TASK) or ""),
-        success={"true": True, "false": False}.get(success_text),
-        seed=str(custom.get(contract.CUSTOM_SEED, "")),
+        task="",
+        success=None,
+        seed="",
         joint_states=stream([(s, p) for _, s, p in raw_states], stamped=True),
         joint_commands=stream([(t, target) for (t, _), target in zip(accepted, targets)]),
         reward=stream(raw_reward),
@@ -288,7 +374,7 @@ def read_episode(path: Path, cameras: list[str] | None) -> Episode:
         files=files,
         rejected_commands=len(reasons),
         rejection_reasons=reasons[:3],
-        simulation=simulation_settings(path, custom),
+        notes=report.notes,
     )
 
 

@@ -6,9 +6,11 @@ the robot obeyed: /joint_commands and /forward_position_controller/commands vali
 merged as the nodes do, so101.dataset.commands), observation.environment_state (the cube's pose from /cube/pose: x y z
 in m and the orientation quaternion w x y z, world frame; --no-environment-state leaves it out),
 observation.images.<camera> (video), next.reward, next.success, and the episode's task. Units are LeRobot's SO-101 conventions (degrees, gripper 0-100) unless
---units radians. An episode that cannot be converted faithfully (cut short, unreadable, a stream
-missing, a camera changing size, malformed metadata) is reported and skipped; the others are
-converted. A silence longer than --max-gap in the joint states, cube pose or a camera splits an
+--units radians. An episode that cannot be converted faithfully (unreadable, a stream missing, a
+camera changing size, malformed metadata, a file that is no MCAP or holds none of the stack's
+topics) is reported and skipped, naming the file and why; the others are converted. A recording
+cut short (the recorder killed: no metadata.yaml, its last file cut in the middle) is converted
+from what its files hold up to the cut, with a note. A silence longer than --max-gap in the joint states, cube pose or a camera splits an
 episode into parts, each converted as an episode of its own when it has at least two frames.
 Cameras recorded raw (sensor_msgs/Image) or compressed (sensor_msgs/CompressedImage, JPEG or PNG:
 so101-launch's default) alike. Episodes are streamed: a first read of a bag keeps every stream's
@@ -300,6 +302,9 @@ def convert(args) -> int:
     for path in tqdm(paths, desc="episodes", unit="episode", disable=args.quiet):
         try:
             episode = read_episode(path, cameras)
+            for note in episode.notes:  # what was recovered rather than read as recorded
+                log.warning("%s", note)
+                notes.append(note)
             if environment_state is None:
                 environment_state = bool(episode.cube_pose.times)
                 if not environment_state:
