@@ -43,6 +43,7 @@ def test_camera_topics_follow_the_contract():
         "so101-watch-sim",
         "so101-dataset-check",
         "so101-learn",
+        "so101-sysid",
         "so101-description",
     ],
 )

@@ -18,12 +18,24 @@ class Subcommand:
     description: str | None = None  # its own --help text, laid out as written (default: the summary)
 
 
+class HelpFormatter(argparse.RawDescriptionHelpFormatter):
+    """Descriptions laid out as written; each subcommand's summary on its name's line (argparse
+    measures the names without the indent it prints them with, so a long one got a line alone)."""
+
+    def add_argument(self, action: argparse.Action) -> None:
+        super().add_argument(action)
+        if action.help is not argparse.SUPPRESS and isinstance(action, argparse._SubParsersAction):
+            names = [len(self._format_action_invocation(sub)) for sub in action._get_subactions()]
+            indent = self._current_indent + self._indent_increment
+            self._action_max_length = max(self._action_max_length, max(names, default=0) + indent)
+
+
 def parser(
     prog: str, description: str | None, subcommands: Mapping[str, Subcommand], metavar: str = "COMMAND", title: str = "commands"
 ) -> argparse.ArgumentParser:
     """The tool's parser: one subparser per entry of `subcommands`, in table order, listed under
     `title` in its --help."""
-    tool = argparse.ArgumentParser(prog=prog, description=description, formatter_class=argparse.RawDescriptionHelpFormatter)
+    tool = argparse.ArgumentParser(prog=prog, description=description, formatter_class=HelpFormatter)
     chosen = tool.add_subparsers(dest="subcommand", required=True, metavar=metavar, title=title)
     for name, subcommand in subcommands.items():
         sub = chosen.add_parser(
