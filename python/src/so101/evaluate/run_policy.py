@@ -35,6 +35,35 @@ log = logging.getLogger("so101-run-policy")
 
 
 # =========================================================================== live
+class PeriodClock:
+    """The live loop's periods: each ends one period after the last, except that a period that ran
+    past its end (a slow inference, a busy machine) is late: the next one starts then, and the time
+    it overran is lost instead of made up by a burst of commands. So the accounting adds up:
+    periods x period + lost = the time elapsed since the start (up to the current period)."""
+
+    def __init__(self, period: float, now: float):
+        self.period = period
+        self.begun = now
+        self.tick = now  # the end of the current period
+        self.periods = 0
+        self.late = 0
+        self.lost = 0.0  # s of wall time the late periods ran past their end
+
+    def elapsed(self) -> float:
+        """The periods begun so far and the time lost, in seconds: what the run's length counts."""
+        return self.tick - self.begun
+
+    def next_period(self, now: float) -> float:
+        """Ends the current period at `now`; returns the wall time the next one ends at."""
+        self.periods += 1
+        self.tick += self.period
+        if now > self.tick:
+            self.late += 1
+            self.lost += now - self.tick
+            self.tick = now  # never burst to catch up
+        return self.tick
+
+
 class LiveInputs:
     """The newest /joint_states, camera frames and (for a policy that takes the environment state)
     /cube/pose, with the wall time each arrived."""
@@ -94,7 +123,8 @@ def run_live(args, policy: StackPolicy) -> int:
     commands = node.create_publisher(JointState, f"{prefix}/{contract.JOINT_COMMANDS}", 10)
     camera_names = [camera.name for camera in policy.cameras]
     period = 1.0 / args.fps
-    steps = late = held = 0
+    steps = held = 0
+    clock: PeriodClock | None = None
     inference: list[float] = []
     try:
         if args.reset:
@@ -128,9 +158,8 @@ def run_live(args, policy: StackPolicy) -> int:
         )
         policy.reset()
         log.info("running at %.1f Hz%s", args.fps, f" for {args.duration:.0f} s" if args.duration else " until Ctrl-C")
-        begun = time.monotonic()
-        tick = begun
-        while not args.duration or tick - begun < args.duration:
+        clock = PeriodClock(period, time.monotonic())
+        while not args.duration or clock.elapsed() < args.duration:
             missing = inputs.stale(camera_names, args.max_age)
             if missing:
                 held += 1
@@ -148,10 +177,7 @@ def run_live(args, policy: StackPolicy) -> int:
                 msg.header.stamp = node.get_clock().now().to_msg()
                 commands.publish(msg)
                 steps += 1
-            tick += period
-            if time.monotonic() > tick:
-                late += 1
-                tick = time.monotonic()  # never burst to catch up
+            tick = clock.next_period(time.monotonic())
             while (wait := tick - time.monotonic()) > 0:
                 rclpy.spin_once(node, timeout_sec=wait)
     except KeyboardInterrupt:
@@ -160,7 +186,12 @@ def run_live(args, policy: StackPolicy) -> int:
         node.destroy_node()
         rclpy.try_shutdown()
     mean_ms = 1000 * float(np.mean(inference)) if inference else 0.0
-    print(f"{steps} commands at {args.fps:.0f} Hz, inference {mean_ms:.1f} ms mean, {late} late periods, {held} held")
+    # The accounting adds up: (commands + held periods) / fps + lost = the run's length, within a period.
+    late, lost = (clock.late, clock.lost) if clock else (0, 0.0)
+    print(
+        f"{steps} commands at {args.fps:.0f} Hz, inference {mean_ms:.1f} ms mean, {late} late periods "
+        f"({lost:.2f} s lost), {held} held"
+    )
     return 0
 
 
