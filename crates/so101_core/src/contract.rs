@@ -93,7 +93,7 @@ pub const CAMERA_NAMES: [&str; 3] = ["top", "front", "wrist"];
 pub fn python_module() -> String {
     let mut out = String::from(
         "\"\"\"The topic contract's facts, generated from the Rust crate so101_core (contract.rs,\n\
-         robot.rs, task.rs) by `so101_contract --python`: do not edit; a test fails when they differ.\"\"\"\n\n\
+         robot.rs, task.rs, servo/params.rs) by `so101_contract --python`: do not edit; a test fails when they differ.\"\"\"\n\n\
          from typing import NamedTuple\n\n",
     );
     let quoted = |names: &[&str]| {
@@ -111,8 +111,16 @@ pub fn python_module() -> String {
     out += ")\n";
     out += &format!("CAMERA_NAMES = ({})\n", quoted(&CAMERA_NAMES));
     out += &format!(
-        "# The STS3215's magnetic encoder: ticks per revolution.\nENCODER_TICKS_PER_REVOLUTION = {}\n\n",
-        crate::servo::params::TICKS_PER_REVOLUTION as u32
+        "# The STS3215's magnetic encoder: ticks per revolution.\nENCODER_TICKS_PER_REVOLUTION = {}\n",
+        crate::servo::TICKS_PER_REVOLUTION
+    );
+    out += &format!(
+        "# The servo models known by name (anything else is a so101-sysid parameter file), and the\n\
+         # one the simulation uses unless told (so101_core::servo).\n\
+         SERVO_MODELS = ({})\n\
+         DEFAULT_SERVO_MODEL = \"{}\"\n\n",
+        quoted(&crate::servo::SERVO_MODELS),
+        crate::servo::DEFAULT_SERVO_MODEL
     );
     out += &tasks_python();
     out += "# Topics, services and actions, relative to the namespace.\n";
@@ -176,7 +184,8 @@ pub fn python_module() -> String {
 /// The tasks' facts (so101_core::task) as a Python table keyed by task name.
 fn tasks_python() -> String {
     let mut out = format!(
-        "# The control rate of the arm, the dataset and every task (Hz).\n\
+        "# The control rate of a policy and of teleoperated demonstrations: one action and one\n\
+         # observation per period, a dataset's fps, every task's default (Hz).\n\
          CONTROL_RATE = {CONTROL_RATE_HZ:?}\n\n\n\
          class Task(NamedTuple):\n    \
              \"\"\"A task's facts (so101_core::task::TaskFacts).\"\"\"\n\n    \

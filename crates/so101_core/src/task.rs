@@ -6,8 +6,10 @@
 
 use clap::builder::PossibleValue;
 
-/// The control rate of the arm, the recorder's dataset and every task (Hz): one command and one
-/// observation per period.
+/// The control rate of a policy and of teleoperated demonstrations (Hz): one action and one
+/// observation per period, a dataset's fps, every task's default. Not the rates underneath it: the
+/// sim node's physics periods, teleop's command stream and the driver's bus cycles each have their
+/// own (so101_sim_node, teleop_node, so101_feetech_driver).
 pub const CONTROL_RATE_HZ: f64 = 30.0;
 
 /// Which task the episode scores.

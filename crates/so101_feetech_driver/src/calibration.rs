@@ -17,16 +17,19 @@ use std::{
 };
 
 use serde::{Deserialize, Serialize};
-use so101_core::robot::{JOINT_COUNT, JOINT_LIMITS, JOINT_NAMES};
+use so101_core::{
+    robot::{JOINT_COUNT, JOINT_LIMITS, JOINT_NAMES},
+    servo::TICKS_PER_REVOLUTION,
+};
 
 use crate::protocol::MAX_ID;
 
 /// LeRobot divides by the model's resolution minus one (4095), not by 4096.
-const RADIANS_PER_TICK: f64 = 2.0 * PI / 4095.0;
+const RADIANS_PER_TICK: f64 = 2.0 * PI / MAX_TICKS as f64;
 /// Index of the gripper in joint order.
 const GRIPPER: usize = 5;
 /// Highest tick value of a 12-bit position.
-pub const MAX_TICKS: i32 = 4095;
+pub const MAX_TICKS: i32 = TICKS_PER_REVOLUTION as i32 - 1;
 /// Largest Homing_Offset the register holds (sign-magnitude, 11 bits).
 pub const MAX_HOMING_OFFSET: i32 = 2047;
 

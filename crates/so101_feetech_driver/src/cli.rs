@@ -50,9 +50,9 @@ pub struct RunArgs {
     pub port: PortArgs,
     #[command(flatten)]
     pub calibration: CalibrationArgs,
-    /// Control cycles per second (each: one SYNC_READ of positions, one SYNC_WRITE of goals), or
+    /// Bus cycles per second (each: one SYNC_READ of positions, one SYNC_WRITE of goals), or
     /// "max" for as fast as the bus allows.
-    #[arg(long, default_value = "200", value_parser = parse_rate)]
+    #[arg(long, default_value_t = CycleRate::Hz(DEFAULT_CYCLE_RATE_HZ), value_parser = parse_rate)]
     pub rate: CycleRate,
     /// Reads per second of velocity, load, voltage, temperature and current.
     #[arg(long, default_value_t = 10.0, value_parser = parse_telemetry_rate)]
@@ -96,6 +96,11 @@ pub struct RunArgs {
     pub node: NodeArgs,
 }
 
+/// Bus cycles per second unless --rate says otherwise: each reads the positions and writes the
+/// goals, so /joint_states comes at this rate, well above the policy's control rate
+/// (so101_core::task::CONTROL_RATE_HZ) and teleop's command rate.
+pub const DEFAULT_CYCLE_RATE_HZ: f64 = 200.0;
+
 /// How often the control loop runs.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub enum CycleRate {
@@ -108,6 +113,16 @@ impl CycleRate {
         match self {
             Self::Hz(hz) => Some(Duration::from_secs_f64(1.0 / hz)),
             Self::Max => None,
+        }
+    }
+}
+
+/// As --rate takes it: the number of Hz, or "max".
+impl std::fmt::Display for CycleRate {
+    fn fmt(&self, formatter: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Self::Hz(hz) => write!(formatter, "{hz}"),
+            Self::Max => formatter.write_str("max"),
         }
     }
 }

@@ -14,12 +14,7 @@ use so101_core::{
 };
 
 fn arm_params(base: &str) -> PyResult<ArmServoParams> {
-    match ServoModelChoice::parse(base).map_err(|error| PyValueError::new_err(error.to_string()))? {
-        ServoModelChoice::Sts3215(params) => Ok(*params),
-        ServoModelChoice::Gain80 => Err(PyValueError::new_err(
-            "gain80 has no servo parameters to fit: start from sts3215 or a parameter file",
-        )),
-    }
+    ServoModelChoice::parse_params(base).map_err(|error| PyValueError::new_err(error.to_string()))
 }
 
 /// (time, value) rows of an N x 2 array.

@@ -25,7 +25,7 @@ use so101_feetech_driver::{
     },
 };
 
-use crate::{servo::ServoModel, EmulatorError};
+use crate::{error::EmulatorError, servo::ServoModel};
 
 /// Status packet bytes that are not data: header, id, length, error, checksum.
 const STATUS_FRAMING: usize = 6;

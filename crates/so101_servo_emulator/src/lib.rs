@@ -11,34 +11,19 @@
 //! - `in_process`: the bus as an in-process transport (the driver's `Connector`), for the driver's
 //!   tests (I/O-free).
 //! - `pty`: serving the bus on a pty, with hangups and a symlink that survives them (I/O).
+//! - `error`: what starting the emulator or persisting its state can fail with.
 
 pub mod bus;
 pub mod control;
 pub mod dynamics;
+pub mod error;
 pub mod in_process;
 pub mod pty;
 pub mod servo;
 
-use std::path::PathBuf;
-
 pub use bus::{BusEmulator, Faults, Response, SlotSnapshot, SlotState, Timing};
 pub use control::{ControlCommand, ControlError};
+pub use error::EmulatorError;
 pub use in_process::{GoalAudit, InProcessBus, InProcessTransport};
 pub use pty::{Emulator, EmulatorConfig};
 pub use servo::ServoModel;
-
-#[derive(Debug, thiserror::Error)]
-pub enum EmulatorError {
-    #[error("cannot open a pseudo-terminal: {0}")]
-    OpenPty(#[source] nix::Error),
-    #[error("cannot make the pseudo-terminal raw: {0}")]
-    RawMode(#[source] nix::Error),
-    #[error("bad link path {path}: {reason}")]
-    BadLink { path: PathBuf, reason: String },
-    #[error("cannot read state file {path}: {reason}")]
-    StateFile { path: PathBuf, reason: String },
-    #[error("cannot save state file {path}: {reason}")]
-    SaveState { path: PathBuf, reason: String },
-    #[error("cannot start the emulator thread: {0}")]
-    Thread(#[source] std::io::Error),
-}

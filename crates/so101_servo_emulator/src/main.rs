@@ -99,12 +99,7 @@ struct Cli {
 }
 
 fn parse_servo_params(text: &str) -> Result<ArmServoParams, String> {
-    match ServoModelChoice::parse(text).map_err(|error| error.to_string())? {
-        ServoModelChoice::Sts3215(params) => Ok(*params),
-        ServoModelChoice::Gain80 => {
-            Err("gain80 is the simulation's position actuator, not a servo model: use sts3215 or a file".into())
-        }
-    }
+    ServoModelChoice::parse_params(text).map_err(|error| error.to_string())
 }
 
 impl Cli {

@@ -34,8 +34,8 @@ use so101_feetech_driver::{
 use crate::{
     bus::{calibrated_servos, BusEmulator, SlotSnapshot, SlotState, Timing},
     control::ControlCommand,
+    error::EmulatorError,
     servo::{ServoModel, DEFAULT_TAU},
-    EmulatorError,
 };
 
 /// How long one poll of the master waits, so stop and hangup requests are seen promptly.

@@ -28,9 +28,9 @@ use std::time::Duration;
 
 use crate::dynamics::ShaftDynamics;
 
-use so101_core::servo::{JointLoad, ServoMechanics, ServoRegisters};
+use so101_core::servo::{JointLoad, ServoMechanics, ServoRegisters, TICKS_PER_REVOLUTION};
 use so101_feetech_driver::{
-    calibration::MotorCalibration,
+    calibration::{MotorCalibration, MAX_TICKS},
     protocol::{
         registers::{self as reg, Register, RegisterError, EPROM_END, STS3215_MODEL},
         ServoErrors, MAX_ID,
@@ -42,9 +42,6 @@ pub const DEFAULT_TAU: Duration = Duration::from_millis(40);
 /// Where a factory servo's shaft rests: the middle of the revolution.
 pub const DEFAULT_ACTUAL: f64 = 2048.0;
 
-const TICKS: f64 = 4096.0;
-/// The encoder's highest reading.
-const MAX_ENCODER: i32 = 4095;
 /// Moving (66) reads 1 while the position error exceeds this many ticks.
 const MOVING_THRESHOLD: f64 = 2.0;
 /// Present_Load (0.1 % of full torque) per tick of position error: 500 ticks saturate it.
@@ -346,7 +343,7 @@ impl ServoModel {
     /// does with torque off.
     pub fn set_actual(&mut self, ticks: f64) {
         if ticks.is_finite() {
-            self.actual = ticks.rem_euclid(TICKS);
+            self.actual = ticks.rem_euclid(f64::from(TICKS_PER_REVOLUTION));
             let zero = self.joint_zero();
             if let Some(dynamics) = &mut self.dynamics {
                 dynamics.place(self.actual, zero);
@@ -465,7 +462,7 @@ impl ServoModel {
 
     /// What the encoder reads: the shaft rounded to a tick, 0..=4095.
     fn encoder(&self) -> i32 {
-        (self.actual.round() as i32).clamp(0, MAX_ENCODER)
+        (self.actual.round() as i32).clamp(0, MAX_TICKS)
     }
 
     /// Present_Position: the encoder minus Homing_Offset, not wrapped.
@@ -484,7 +481,7 @@ impl ServoModel {
         if !self.holding && min < max {
             goal = goal.clamp(min, max);
         }
-        f64::from((goal + self.register(reg::HOMING_OFFSET)).clamp(0, MAX_ENCODER))
+        f64::from((goal + self.register(reg::HOMING_OFFSET)).clamp(0, MAX_TICKS))
     }
 
     /// Signed distance from the shaft to where the motor drives it (zero with torque off).
@@ -528,7 +525,7 @@ impl ServoModel {
             if let Some(dynamics) = &mut self.dynamics {
                 // The motor never drives the shaft across the encoder's seam.
                 let moved = dynamics.advance(registers, zero, target, seconds, true);
-                self.actual = moved.clamp(0.0, f64::from(MAX_ENCODER));
+                self.actual = moved.clamp(0.0, f64::from(MAX_TICKS));
             }
             return;
         }

@@ -6,6 +6,10 @@ use so101_core::{contract::topics, ros::NodeArgs, task::TaskKind};
 
 use crate::{input::keyboard::KEY_HELP, motion::Mode};
 
+/// Teleop's command rate, /joint_commands per second, unless --rate says otherwise. Not the
+/// policy's control rate (so101_core::task::CONTROL_RATE_HZ), at which a dataset samples the arm.
+pub const DEFAULT_COMMAND_RATE_HZ: f64 = 50.0;
+
 /// Highest speeds and step an operator may set (at start or as parameters at run time).
 pub const MAX_JOINT_SPEED: f64 = 10.0;
 pub const MAX_LINEAR_SPEED: f64 = 1.0;
@@ -40,8 +44,8 @@ pub struct Args {
     /// Joint space or Cartesian end-effector space (x, y, z, pitch, roll of the gripper).
     #[arg(long, value_enum, default_value = "joint")]
     pub mode: Mode,
-    /// /joint_commands per second.
-    #[arg(long, default_value_t = 50.0, value_parser = parse_positive("rate", 1000.0))]
+    /// Command rate: /joint_commands per second.
+    #[arg(long, default_value_t = DEFAULT_COMMAND_RATE_HZ, value_parser = parse_positive("rate", 1000.0))]
     pub rate: f64,
     /// Run on sim time (/clock) instead of wall time: the rate and the expert's timing follow the
     /// simulation at any --speed.

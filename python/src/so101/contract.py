@@ -1,5 +1,5 @@
 """The topic contract's facts, generated from the Rust crate so101_core (contract.rs,
-robot.rs, task.rs) by `so101_contract --python`: do not edit; a test fails when they differ."""
+robot.rs, task.rs, servo/params.rs) by `so101_contract --python`: do not edit; a test fails when they differ."""
 
 from typing import NamedTuple
 
@@ -16,8 +16,13 @@ JOINT_LIMITS = (
 CAMERA_NAMES = ("top", "front", "wrist")
 # The STS3215's magnetic encoder: ticks per revolution.
 ENCODER_TICKS_PER_REVOLUTION = 4096
+# The servo models known by name (anything else is a so101-sysid parameter file), and the
+# one the simulation uses unless told (so101_core::servo).
+SERVO_MODELS = ("sts3215", "gain80")
+DEFAULT_SERVO_MODEL = "sts3215"
 
-# The control rate of the arm, the dataset and every task (Hz).
+# The control rate of a policy and of teleoperated demonstrations: one action and one
+# observation per period, a dataset's fps, every task's default (Hz).
 CONTROL_RATE = 30.0
 
 

@@ -10,7 +10,8 @@ pub mod plant;
 
 pub use model::{ServoOutput, ServoState};
 pub use params::{
-    ArmServoParams, ServoMechanics, ServoModelChoice, ServoParams, ServoParamsError,
-    ServoRegisters, RAD_PER_TICK,
+    ArmServoParams, ServoMechanics, ServoModelChoice, ServoModelSpec, ServoParams,
+    ServoParamsError, ServoRegisters, DEFAULT_SERVO_MODEL, GAIN80, RAD_PER_TICK, SERVO_MODELS,
+    STS3215, TICKS_PER_REVOLUTION,
 };
 pub use plant::{JointLoad, JointPlant, ARM_LOADS};

@@ -8,10 +8,19 @@ use serde::{Deserialize, Serialize};
 
 use crate::robot::{JOINT_COUNT, JOINT_NAMES};
 
-/// Encoder ticks per revolution.
-pub const TICKS_PER_REVOLUTION: f64 = 4096.0;
+/// Encoder ticks per revolution of the STS3215's magnetic encoder (positions read 0..=4095).
+pub const TICKS_PER_REVOLUTION: u32 = 4096;
 /// Radians per encoder tick.
-pub const RAD_PER_TICK: f64 = std::f64::consts::TAU / TICKS_PER_REVOLUTION;
+pub const RAD_PER_TICK: f64 = std::f64::consts::TAU / TICKS_PER_REVOLUTION as f64;
+
+/// The preset name of the STS3215 model with its published parameters.
+pub const STS3215: &str = "sts3215";
+/// The preset name of the scene's own position actuator (see [`ServoModelChoice::Gain80`]).
+pub const GAIN80: &str = "gain80";
+/// The servo model every door (sim node, in-process worlds, Gymnasium, LeRobot) starts with.
+pub const DEFAULT_SERVO_MODEL: &str = STS3215;
+/// The servo models known by name (any other is a parameter file).
+pub const SERVO_MODELS: [&str; 2] = [STS3215, GAIN80];
 
 /// The registers that shape the motion, in the servo's own units (see
 /// ../shared/notes/feetech-sts3215.md for the control table).
@@ -255,8 +264,10 @@ pub enum ServoParamsError {
         name: &'static str,
         value: f64,
     },
-    #[error("{0:?} is not a servo model: use gain80, sts3215 or a parameter file (.json)")]
+    #[error("{0:?} is not a servo model: use {GAIN80}, {STS3215} or a parameter file (.json)")]
     Model(String),
+    #[error("{GAIN80} is the scene's position actuator, with no servo parameters: use {STS3215} or a parameter file (.json)")]
+    NoParameters,
 }
 
 /// Every joint's servo, in contract order: what a parameter file holds.
@@ -342,35 +353,102 @@ impl Default for ServoModelChoice {
 impl ServoModelChoice {
     pub fn name(&self) -> &'static str {
         match self {
-            Self::Gain80 => "gain80",
-            Self::Sts3215(_) => "sts3215",
+            Self::Gain80 => GAIN80,
+            Self::Sts3215(_) => STS3215,
         }
     }
 
     /// `gain80`, `sts3215` or the path of a parameter file.
     pub fn parse(text: &str) -> Result<Self, ServoParamsError> {
         match text {
-            "gain80" => Ok(Self::Gain80),
-            "sts3215" => Ok(Self::Sts3215(Box::new(ArmServoParams::sts3215()))),
-            path if path.ends_with(".json") => {
-                ArmServoParams::load(Path::new(path)).map(|params| Self::Sts3215(Box::new(params)))
-            }
+            GAIN80 => Ok(Self::Gain80),
+            STS3215 => Ok(Self::default()),
+            path if path.ends_with(".json") => Self::load(Path::new(path)),
             other => Err(ServoParamsError::Model(other.to_owned())),
         }
+    }
+
+    /// The STS3215 model with a parameter file's values (any file name).
+    pub fn load(path: &Path) -> Result<Self, ServoParamsError> {
+        ArmServoParams::load(path).map(|params| Self::Sts3215(Box::new(params)))
+    }
+
+    /// The parameters of the STS3215 model `text` names (`sts3215` or a parameter file): what the
+    /// emulator and the identification work with; `gain80` has none.
+    pub fn parse_params(text: &str) -> Result<ArmServoParams, ServoParamsError> {
+        match Self::parse(text)? {
+            Self::Sts3215(params) => Ok(*params),
+            Self::Gain80 => Err(ServoParamsError::NoParameters),
+        }
+    }
+}
+
+/// A servo model as the user named it (a preset's name or a parameter file's path) with the model
+/// it gives: parsed, and its file read, once, where the option is taken; the name is what the
+/// node's parameters and logs show.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ServoModelSpec {
+    name: String,
+    choice: ServoModelChoice,
+}
+
+impl ServoModelSpec {
+    /// `gain80`, `sts3215` or the path of a parameter file (.json).
+    pub fn parse(text: &str) -> Result<Self, ServoParamsError> {
+        Ok(Self {
+            name: text.to_owned(),
+            choice: ServoModelChoice::parse(text)?,
+        })
+    }
+
+    /// A parameter file, whatever its name (a path handed over as a path, not as text).
+    pub fn load(path: &Path) -> Result<Self, ServoParamsError> {
+        Ok(Self {
+            name: path.display().to_string(),
+            choice: ServoModelChoice::load(path)?,
+        })
+    }
+
+    /// The preset's name or the file's path, as given.
+    pub fn name(&self) -> &str {
+        &self.name
+    }
+
+    pub fn choice(&self) -> &ServoModelChoice {
+        &self.choice
+    }
+
+    pub fn into_choice(self) -> ServoModelChoice {
+        self.choice
+    }
+}
+
+impl Default for ServoModelSpec {
+    fn default() -> Self {
+        Self {
+            name: DEFAULT_SERVO_MODEL.to_owned(),
+            choice: ServoModelChoice::default(),
+        }
+    }
+}
+
+impl fmt::Display for ServoModelSpec {
+    fn fmt(&self, formatter: &mut fmt::Formatter<'_>) -> fmt::Result {
+        formatter.write_str(&self.name)
+    }
+}
+
+impl FromStr for ServoModelSpec {
+    type Err = String;
+
+    fn from_str(text: &str) -> Result<Self, Self::Err> {
+        Self::parse(text).map_err(|error| error.to_string())
     }
 }
 
 impl fmt::Display for ServoModelChoice {
     fn fmt(&self, formatter: &mut fmt::Formatter<'_>) -> fmt::Result {
         formatter.write_str(self.name())
-    }
-}
-
-impl FromStr for ServoModelChoice {
-    type Err = String;
-
-    fn from_str(text: &str) -> Result<Self, Self::Err> {
-        Self::parse(text).map_err(|error| error.to_string())
     }
 }
 
@@ -425,5 +503,49 @@ impl JointEntry {
             registers: serde_json::from_value(registers)?,
             mechanics: serde_json::from_value(mechanics)?,
         })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_spec_keeps_the_users_name_and_reads_its_file_once() {
+        let default = ServoModelSpec::default();
+        assert_eq!(default, ServoModelSpec::parse(DEFAULT_SERVO_MODEL).unwrap());
+        assert_eq!(default.to_string(), "sts3215");
+        assert_eq!(
+            ServoModelSpec::parse(GAIN80).unwrap().choice(),
+            &ServoModelChoice::Gain80
+        );
+        let path = std::env::temp_dir().join(format!("so101_servo_{}.json", std::process::id()));
+        let mut params = ArmServoParams::sts3215();
+        params.0[0].mechanics.latency = 0.02;
+        std::fs::write(&path, params.to_json()).unwrap();
+        let spec: ServoModelSpec = path.to_str().unwrap().parse().unwrap();
+        std::fs::remove_file(&path).unwrap();
+        assert_eq!(spec.name(), path.display().to_string());
+        let ServoModelChoice::Sts3215(read) = spec.into_choice() else {
+            panic!("a parameter file is the STS3215 model");
+        };
+        assert!((read.0[0].mechanics.latency - 0.02).abs() < 1e-12);
+    }
+
+    #[test]
+    fn a_bad_name_is_refused_with_the_choices() {
+        let error = "sts9999".parse::<ServoModelSpec>().unwrap_err();
+        assert_eq!(
+            error,
+            "\"sts9999\" is not a servo model: use gain80, sts3215 or a parameter file (.json)"
+        );
+        assert!(matches!(
+            ServoModelChoice::parse_params(GAIN80),
+            Err(ServoParamsError::NoParameters)
+        ));
+        assert_eq!(
+            ServoModelChoice::parse_params(STS3215).unwrap(),
+            ArmServoParams::sts3215()
+        );
     }
 }

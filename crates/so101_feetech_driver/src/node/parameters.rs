@@ -9,7 +9,7 @@ use so101_core::{
 };
 
 use crate::{
-    cli::{Cli, CycleRate, RunArgs, MAX_COMMAND_TIMEOUT, MAX_STEP_CEILING},
+    cli::{Cli, RunArgs, MAX_COMMAND_TIMEOUT, MAX_STEP_CEILING},
     safety::SafetyConfig,
 };
 
@@ -17,10 +17,6 @@ use crate::{
 pub fn declarations(args: &RunArgs, limits: &[JointLimit; JOINT_COUNT]) -> Parameters {
     let options = Options::of::<Cli>();
     let text = |value: &dyn std::fmt::Display| Value::String(value.to_string());
-    let rate = match args.rate {
-        CycleRate::Hz(hz) => hz.to_string(),
-        CycleRate::Max => "max".to_owned(),
-    };
     const NEXT_CYCLE: &str = "Takes effect at the next cycle.";
     let mut declarations = vec![
         options.declare("port", text(&args.port.port.display())),
@@ -32,7 +28,7 @@ pub fn declarations(args: &RunArgs, limits: &[JointLimit; JOINT_COUNT]) -> Param
             .declare("calibration", text(&args.calibration.path().display()))
             .effect("Served as the file in use."),
         options.declare("leader", Value::Bool(args.calibration.leader)),
-        options.declare("rate", Value::String(rate)),
+        options.declare("rate", text(&args.rate)),
         options.declare("telemetry_rate", Value::Double(args.telemetry_rate)),
         options
             .declare("max_step", Value::Double(args.max_step))

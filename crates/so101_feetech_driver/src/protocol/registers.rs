@@ -136,8 +136,6 @@ pub const ALL: [Register; 49] = [
 
 /// Model number of the STS3215 (register Model_Number).
 pub const STS3215_MODEL: u16 = 777;
-/// Encoder ticks per revolution.
-pub const TICKS_PER_REVOLUTION: u32 = 4096;
 /// Addresses below this are EPROM (kept across power cycles, written only with Lock = 0).
 pub const EPROM_END: u8 = 40;
 
