@@ -7,7 +7,7 @@ use numpy::{PyArray1, PyArray2, PyArrayMethods, PyReadonlyArray2, PyUntypedArray
 use pyo3::{
     exceptions::{PyIndexError, PyValueError},
     prelude::*,
-    types::PyList,
+    types::{PyDict, PyList},
 };
 use rayon::prelude::*;
 use so101_core::robot::{JointPositions, JOINT_COUNT};
@@ -15,6 +15,7 @@ use so101_sim::env::{TaskEnv, STATE_SIZE};
 
 use crate::{
     cameras::CameraSet,
+    options::WorldOptions,
     world::{joint_targets, limits_array, WorldSpec},
 };
 
@@ -40,34 +41,24 @@ impl WorldBatch {
 
 #[pymethods]
 impl WorldBatch {
-    /// `threads`: worker threads stepping the worlds (0: one per CPU core).
+    /// `threads`: worker threads stepping the worlds (0: one per CPU core); the other options are
+    /// World's.
     #[new]
-    #[pyo3(signature = (num_worlds, scene, lite = true, task = so101_core::task::TaskKind::CubeToBin.name(), control_rate = so101_core::task::CONTROL_RATE_HZ, dense_reward = false, seed = 0, threads = 0, servo_params = "sts3215", randomize = "off"))]
-    #[allow(clippy::too_many_arguments)]
+    #[pyo3(signature = (num_worlds, scene, *, threads = 0, **options))]
     fn new(
         num_worlds: usize,
         scene: &str,
-        lite: bool,
-        task: &str,
-        control_rate: f64,
-        dense_reward: bool,
-        seed: u64,
         threads: usize,
-        servo_params: &str,
-        randomize: &str,
+        options: Option<&Bound<'_, PyDict>>,
     ) -> PyResult<Self> {
         if num_worlds == 0 {
             return Err(PyValueError::new_err("a batch needs at least one world"));
         }
-        let spec = WorldSpec::new(
-            scene,
-            lite,
-            task,
-            control_rate,
-            dense_reward,
-            servo_params,
-            randomize,
-        )?;
+        let spec = WorldSpec {
+            scene: scene.to_owned(),
+            options: WorldOptions::from_keywords("WorldBatch", options)?,
+        };
+        let seed = spec.options.seed;
         let envs = (0..num_worlds as u64)
             .map(|index| spec.build(seed.wrapping_add(index)))
             .collect::<PyResult<Vec<_>>>()?;

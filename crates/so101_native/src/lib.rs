@@ -6,6 +6,7 @@
 mod batch;
 mod cameras;
 mod expert;
+mod options;
 mod sysid;
 mod world;
 

@@ -3,81 +3,45 @@
 use std::sync::{Mutex, PoisonError};
 
 use numpy::{PyArray1, PyArray2, PyReadonlyArray1};
-use pyo3::{exceptions::PyValueError, prelude::*};
+use pyo3::{exceptions::PyValueError, prelude::*, types::PyDict};
 use so101_core::robot::{JointPositions, JOINT_COUNT};
-use so101_core::servo::ServoModelChoice;
 use so101_sim::{
     env::{SimOptions, TaskEnv, TaskSettings},
-    randomization::RandomizationConfig,
     scene,
-    task::TaskKind,
 };
 
-use crate::cameras::{CameraSet, Frames};
+use crate::{
+    cameras::{CameraSet, Frames},
+    options::WorldOptions,
+};
 
 /// How a world is made: the same for one world and for every world of a batch.
 #[derive(Debug, Clone)]
 pub struct WorldSpec {
     pub scene: String,
-    pub lite: bool,
-    pub task: TaskKind,
-    pub control_rate: f64,
-    pub dense_reward: bool,
-    pub options: SimOptions,
+    pub options: WorldOptions,
 }
 
 impl WorldSpec {
-    /// `servo_params`: `sts3215`, `gain80` or a parameter file (.json); `randomize`: `off`,
-    /// `default` or a randomization file (.toml).
-    #[allow(clippy::too_many_arguments)]
-    pub fn new(
-        scene: &str,
-        lite: bool,
-        task: &str,
-        control_rate: f64,
-        dense_reward: bool,
-        servo_params: &str,
-        randomize: &str,
-    ) -> PyResult<Self> {
-        if !(control_rate.is_finite() && control_rate > 0.0) {
-            return Err(PyValueError::new_err(format!(
-                "control_rate {control_rate} is not a positive rate in Hz"
-            )));
-        }
-        Ok(Self {
-            scene: scene.to_owned(),
-            lite,
-            task: task.parse().map_err(PyValueError::new_err)?,
-            control_rate,
-            dense_reward,
-            options: SimOptions {
-                servos: ServoModelChoice::parse(servo_params)
-                    .map_err(|error| PyValueError::new_err(error.to_string()))?,
-                randomization: match randomize {
-                    "off" => None,
-                    other => Some(
-                        RandomizationConfig::parse(other)
-                            .map_err(|error| PyValueError::new_err(error.to_string()))?,
-                    ),
-                },
-            },
-        })
-    }
-
     /// Loads the scene and binds a task environment with the placement sequence of `seed`.
     pub fn build(&self, seed: u64) -> PyResult<TaskEnv> {
-        let simulation = scene::load(self.scene.as_ref(), self.lite)
+        let options = &self.options;
+        let simulation = scene::load(self.scene.as_ref(), options.lite)
             .map_err(|error| PyValueError::new_err(format!("{error:#}")))?;
         let settings = TaskSettings {
-            kind: self.task,
-            dense_reward: self.dense_reward,
+            kind: options.task,
+            dense_reward: options.dense_reward,
+        };
+        let sim_options = SimOptions {
+            servos: options.servo_params.choice().clone(),
+            randomization: options.randomize.config().cloned(),
         };
         TaskEnv::with_options(
             simulation,
-            self.control_rate,
+            options.control_rate,
             settings,
             seed,
-            self.options.clone(),
+            sim_options,
         )
         .map_err(|error| PyValueError::new_err(error.to_string()))
     }
@@ -112,6 +76,11 @@ pub fn limits_array<'py>(py: Python<'py>, env: &TaskEnv) -> Bound<'py, PyArray2<
 /// the next seeded placement, the arm settled at home), `observe()` gives
 /// (state float64[19], reward, success). State: joint positions (6, rad), velocities (6, rad/s),
 /// cube position (3, m, world) and orientation (4, w x y z).
+///
+/// Keyword options (WorldBatch's too): lite (the mesh-free scene; default), task, control_rate
+/// (Hz; default the policy's control rate), dense_reward, seed, servo_params (a model's name or a
+/// so101-sysid parameter file, str or os.PathLike; default the STS3215 model) and randomize
+/// (True: the default ranges, False, "off", "default" or a file of ranges; default off).
 #[pyclass(module = "so101_native")]
 pub struct World {
     // In a Mutex only so the class is Sync, as PyO3 requires; every method takes `&mut self`
@@ -133,30 +102,15 @@ impl World {
 #[pymethods]
 impl World {
     #[new]
-    #[pyo3(signature = (scene, lite = true, task = so101_core::task::TaskKind::CubeToBin.name(), control_rate = so101_core::task::CONTROL_RATE_HZ, dense_reward = false, seed = 0, servo_params = "sts3215", randomize = "off"))]
-    #[allow(clippy::too_many_arguments)]
-    fn new(
-        scene: &str,
-        lite: bool,
-        task: &str,
-        control_rate: f64,
-        dense_reward: bool,
-        seed: u64,
-        servo_params: &str,
-        randomize: &str,
-    ) -> PyResult<Self> {
-        let spec = WorldSpec::new(
-            scene,
-            lite,
-            task,
-            control_rate,
-            dense_reward,
-            servo_params,
-            randomize,
-        )?;
+    #[pyo3(signature = (scene, **options))]
+    fn new(scene: &str, options: Option<&Bound<'_, PyDict>>) -> PyResult<Self> {
+        let spec = WorldSpec {
+            scene: scene.to_owned(),
+            options: WorldOptions::from_keywords("World", options)?,
+        };
         Ok(Self {
             inner: Mutex::new(WorldState {
-                env: spec.build(seed)?,
+                env: spec.build(spec.options.seed)?,
                 cameras: None,
             }),
         })

@@ -238,6 +238,13 @@ impl World {
         self.timestep
     }
 
+    /// Sim time at which the next [`World::advance`] ends: whole physics steps, so the period's
+    /// length is the rounded one the world runs (at 30 Hz on 2 ms steps, 32 or 34 ms), not 1/rate.
+    pub fn period_end(&self) -> f64 {
+        let steps = steps_in_period(self.episode_periods, self.control_period, self.timestep);
+        self.episode_start_time + (self.episode_steps + steps) as f64 * self.timestep
+    }
+
     /// Physics steps since the world was created.
     pub fn total_steps(&self) -> u64 {
         self.total_steps

@@ -81,6 +81,24 @@ fn reset_places_the_cube_and_keeps_time_monotonic() {
     assert!(!outcome.success);
 }
 
+#[test]
+fn the_world_says_when_each_period_ends_in_whole_physics_steps() {
+    let simulation = scene::load(&PathBuf::from(DEFAULT_SCENE), true).expect("the scene loads");
+    // 30 Hz on 2 ms steps: periods of 16 or 17 steps, never 1/30 s.
+    let mut world = World::new(simulation, 1.0 / 30.0).expect("the scene binds");
+    world.settle(0.1);
+    for _ in 0..90 {
+        let end = world.period_end();
+        let steps = (end - world.time()) / world.timestep();
+        assert!(
+            (steps - 16.0).abs() < 1e-6 || (steps - 17.0).abs() < 1e-6,
+            "{steps}"
+        );
+        assert!(world.advance());
+        assert!((world.time() - end).abs() < 1e-12, "{} {end}", world.time());
+    }
+}
+
 fn run_demo(lite: bool) {
     let mut world = world(lite);
     let script = Script::new(&PICK_AND_PLACE);

@@ -1,19 +1,27 @@
 //! Command-line options of so101_sim_node.
 
-use std::path::PathBuf;
+use std::{path::PathBuf, str::FromStr};
 
 use so101_core::{
-    contract::CAMERA_NAMES, ros::NodeArgs, servo::ServoModelChoice, task::CONTROL_RATE_HZ,
+    contract::CAMERA_NAMES,
+    ros::NodeArgs,
+    servo::{ServoModelSpec, DEFAULT_SERVO_MODEL},
+    task::CONTROL_RATE_HZ,
 };
 
 use so101_sim::{
     cameras::spec::{self, CameraList, FrameSize},
     offscreen::RendererChoice,
-    randomization::RandomizationConfig,
+    randomization::{spec as randomization, RandomizationSpec},
     task::TaskKind,
 };
 
 use crate::pacing::{self, TimeMode};
+
+/// Physics periods per second of sim time unless --rate says otherwise: the targets are held for
+/// one period, then /joint_states, /clock and the task topics are published. Not the policy's
+/// control rate (so101_core::task::CONTROL_RATE_HZ), a client's choice of --rate.
+pub const DEFAULT_PERIOD_RATE_HZ: f64 = 100.0;
 
 /// MuJoCo simulation of the SO-101 arm with a cube-to-bin task, publishing /joint_states and
 /// obeying /joint_commands like the physical arm's driver.
@@ -35,8 +43,9 @@ pub struct Args {
     /// Seed of the cube placement on /sim/reset: the same seed gives the same sequence of episodes.
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
-    /// Control rate in Hz: /joint_states, /clock and the task topics are published once per period.
-    #[arg(long, default_value_t = 100.0, value_parser = parse_rate)]
+    /// Physics periods per second of sim time: the commanded targets are held for one period, and
+    /// /joint_states, /clock and the task topics are published once per period.
+    #[arg(long, default_value_t = DEFAULT_PERIOD_RATE_HZ, value_parser = parse_rate)]
     pub rate: f64,
     /// Sim time relative to wall time: a factor (1 = real time, 2 = twice as fast) or "max".
     #[arg(long, default_value = "1", value_parser = pacing::parse_speed, conflicts_with = "lockstep")]
@@ -62,7 +71,8 @@ pub struct Args {
     pub camera_size: FrameSize,
     /// Frames per second of sim time of the cameras that do not name a rate. In real time, frames
     /// the renderer cannot keep up with are skipped (and counted in /diagnostics); in lockstep and
-    /// --speed modes the physics waits for them. Default: the control rate of the tasks and datasets.
+    /// --speed modes the physics waits for them. Default: the policy's control rate (the tasks' and
+    /// datasets').
     #[arg(long, default_value_t = CONTROL_RATE_HZ, value_parser = spec::parse_rate)]
     pub camera_rate: f64,
     /// Also publish JPEG (sensor_msgs/CompressedImage) on /camera/NAME/image_raw/compressed.
@@ -81,12 +91,13 @@ pub struct Args {
     /// The servos' model: "sts3215" (the STS3215 as LeRobot configures it, published mechanics),
     /// "gain80" (the scene's first position servos, for comparison) or a parameter file (.json)
     /// from `so101-sysid fit`.
-    #[arg(long, default_value = "sts3215", value_parser = parse_servo_params)]
-    pub servo_params: String,
-    /// Domain randomization at every /sim/reset: "off", "default" (assets/randomization.toml) or
-    /// a file of ranges (.toml). Each episode's draw is published on /sim/episode.
-    #[arg(long, default_value = "off", value_parser = parse_randomize)]
-    pub randomize: String,
+    #[arg(long, default_value = DEFAULT_SERVO_MODEL, value_parser = ServoModelSpec::from_str)]
+    pub servo_params: ServoModelSpec,
+    /// Domain randomization at every /sim/reset: "off" (or "false"), "default" (or "true":
+    /// assets/randomization.toml) or a file of ranges (.toml). Each episode's draw is published on
+    /// /sim/episode.
+    #[arg(long, default_value = randomization::OFF, value_parser = RandomizationSpec::from_str)]
+    pub randomize: RandomizationSpec,
     /// Exit cleanly after this many seconds of wall time.
     #[arg(long, value_parser = parse_duration)]
     pub duration: Option<f64>,
@@ -96,28 +107,6 @@ pub struct Args {
 
 pub fn default_scene() -> &'static str {
     so101_core::robot::DEFAULT_SCENE
-}
-
-/// Checks the preset or file now (a usage error rather than a failure at start).
-fn parse_servo_params(text: &str) -> Result<String, String> {
-    ServoModelChoice::parse(text).map_err(|error| error.to_string())?;
-    Ok(text.to_owned())
-}
-
-/// Checks the file now, so a bad one is a usage error rather than a failure at start.
-fn parse_randomize(text: &str) -> Result<String, String> {
-    if text != "off" {
-        RandomizationConfig::parse(text).map_err(|error| error.to_string())?;
-    }
-    Ok(text.to_owned())
-}
-
-/// The randomization `--randomize` asks for.
-pub fn randomization(text: &str) -> anyhow::Result<Option<RandomizationConfig>> {
-    if text == "off" {
-        return Ok(None);
-    }
-    Ok(Some(RandomizationConfig::parse(text)?))
 }
 
 fn parse_rate(text: &str) -> Result<f64, String> {
@@ -133,5 +122,58 @@ fn parse_duration(text: &str) -> Result<f64, String> {
     match text.parse::<f64>() {
         Ok(seconds) if (0.0..=1e9).contains(&seconds) => Ok(seconds),
         _ => Err(format!("{text:?} is not a number of seconds from 0 to 1e9")),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use clap::{error::ErrorKind, Parser};
+    use so101_core::servo::ServoModelChoice;
+
+    #[test]
+    fn the_servo_model_and_the_randomization_arrive_parsed() {
+        let args = Args::parse_from(["so101_sim_node"]);
+        assert_eq!(args.servo_params.name(), DEFAULT_SERVO_MODEL);
+        assert_eq!(args.servo_params.choice(), &ServoModelChoice::default());
+        assert_eq!(
+            (args.randomize.name(), args.randomize.config()),
+            ("off", None)
+        );
+        let args = Args::parse_from([
+            "so101_sim_node",
+            "--servo-params",
+            "gain80",
+            "--randomize",
+            "true",
+        ]);
+        assert_eq!(args.servo_params.choice(), &ServoModelChoice::Gain80);
+        assert_eq!(args.randomize, RandomizationSpec::default_ranges());
+    }
+
+    #[test]
+    fn a_bad_model_or_randomization_is_a_usage_error_naming_it() {
+        for (option, value, says) in [
+            (
+                "--servo-params",
+                "sts9999",
+                "\"sts9999\" is not a servo model",
+            ),
+            (
+                "--servo-params",
+                "/nonexistent/fit.json",
+                "/nonexistent/fit.json",
+            ),
+            ("--randomize", "on", "\"on\" is not a randomization"),
+            (
+                "--randomize",
+                "/nonexistent/ranges.toml",
+                "/nonexistent/ranges.toml",
+            ),
+        ] {
+            let error = Args::try_parse_from(["so101_sim_node", option, value]).unwrap_err();
+            assert_eq!(error.kind(), ErrorKind::ValueValidation, "{error}");
+            assert!(error.to_string().contains(says), "{error}");
+        }
     }
 }

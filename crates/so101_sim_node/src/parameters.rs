@@ -4,8 +4,12 @@
 use so101_core::{
     robot::{JointLimit, JOINT_COUNT},
     ros::parameters::{joint_declarations, Options, Parameters, Value},
+    servo::{GAIN80, STS3215},
 };
-use so101_sim::cameras::spec::{MAX_RATE, MIN_RATE};
+use so101_sim::{
+    cameras::spec::{MAX_RATE, MIN_RATE},
+    randomization::spec::{DEFAULT, OFF},
+};
 
 use crate::{cli::Args, pacing::TimeMode};
 
@@ -46,8 +50,14 @@ pub fn declarations(args: &Args, limits: &[JointLimit; JOINT_COUNT]) -> Paramete
         options.declare("rate", Value::Double(args.rate)),
         options
             .declare("servo_params", text(&args.servo_params))
-            .effect("\"sts3215\", \"gain80\" or the parameter file's path."),
-        options.declare("randomize", text(&args.randomize)),
+            .effect(&format!(
+                "\"{STS3215}\", \"{GAIN80}\" or the parameter file's path."
+            )),
+        options
+            .declare("randomize", text(&args.randomize))
+            .effect(&format!(
+                "Served as \"{OFF}\", \"{DEFAULT}\" or the file's path."
+            )),
         options
             .declare("speed", Value::String(speed))
             .effect("\"lockstep\" under --lockstep."),
@@ -108,6 +118,20 @@ mod tests {
         assert_eq!(
             parameters.get("cameras"),
             Some(&Value::StringArray(vec!["top:640x480@15".into()]))
+        );
+    }
+
+    #[test]
+    fn the_servo_model_and_the_randomization_are_served_by_name() {
+        let args = Args::parse_from(["so101_sim_node", "--randomize", "True"]);
+        let parameters = declarations(&args, &JOINT_LIMITS);
+        assert_eq!(
+            parameters.get("servo_params"),
+            Some(&Value::String("sts3215".into()))
+        );
+        assert_eq!(
+            parameters.get("randomize"),
+            Some(&Value::String("default".into()))
         );
     }
 

@@ -8,7 +8,6 @@ use std::{
 
 use anyhow::{Context, Result};
 use ros2_client::Publisher;
-use so101_core::servo::ServoModelChoice;
 use so101_core::{
     contract::topics,
     ros::{
@@ -27,7 +26,7 @@ use so101_sim::{
 
 use crate::{
     cameras::publish::{publish_batches, CameraTopics},
-    cli::{self, Args},
+    cli::Args,
     pacing::{Pacer, TimeMode},
     parameters::{self, Setting},
     ros_io::{Frame, FramePublisher, NodeDiagnostics, PendingCall, SimServices},
@@ -57,8 +56,8 @@ pub fn run(args: Args) -> Result<()> {
         dense_reward: args.dense_reward,
     };
     let options = SimOptions {
-        servos: ServoModelChoice::parse(&args.servo_params)?,
-        randomization: cli::randomization(&args.randomize)?,
+        servos: args.servo_params.choice().clone(),
+        randomization: args.randomize.config().cloned(),
     };
     let env = TaskEnv::with_options(simulation, args.rate, settings, args.seed, options)
         .context("the scene does not fit the node")?;
@@ -406,8 +405,9 @@ impl SimLoop {
     /// Sleeps until the next period may run; false when it slept only part of the way (long waits
     /// are cut into slices so a signal or a command is not kept waiting).
     fn wait_for_wall_clock(&mut self) -> bool {
-        let period_end = self.env.world().time() + 1.0 / self.args.rate;
-        let wait = self.pacer.wait_before(period_end, Instant::now());
+        let wait = self
+            .pacer
+            .wait_before(self.env.world().period_end(), Instant::now());
         if wait.is_zero() {
             return true;
         }
@@ -428,8 +428,7 @@ impl SimLoop {
                 script.targets_at(self.env.world().time() - self.demo_start);
         }
         // The trajectory's setpoint for the end of this period.
-        let period_end = self.env.world().time() + 1.0 / self.args.rate;
-        if let Some(targets) = self.arm.targets(period_end) {
+        if let Some(targets) = self.arm.targets(self.env.world().period_end()) {
             let limits = *self.env.world().limits();
             targets.apply_clamped(self.env.world_mut().targets_mut(), &limits);
         }

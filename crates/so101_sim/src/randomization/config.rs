@@ -79,6 +79,8 @@ pub enum ConfigError {
     },
     #[error("randomization {path}: {message}")]
     Invalid { path: String, message: String },
+    #[error("{0:?} is not a randomization: use off (or false), default (or true) or a file of ranges (.toml)")]
+    Choice(String),
 }
 
 impl RandomizationConfig {
@@ -94,15 +96,6 @@ impl RandomizationConfig {
             source,
         })?;
         Self::from_toml(&text, &path.display().to_string())
-    }
-
-    /// `default` or the path of a TOML file.
-    pub fn parse(text: &str) -> Result<Self, ConfigError> {
-        if text == "default" {
-            Ok(Self::defaults())
-        } else {
-            Self::load(Path::new(text))
-        }
     }
 
     pub fn from_toml(text: &str, name: &str) -> Result<Self, ConfigError> {

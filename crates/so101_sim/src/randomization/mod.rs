@@ -7,6 +7,7 @@
 pub mod apply;
 pub mod config;
 pub mod draw;
+pub mod spec;
 
 use rand::{RngCore, SeedableRng};
 use rand_chacha::ChaCha8Rng;
@@ -15,6 +16,7 @@ use rand_distr::{Distribution, Normal};
 pub use apply::SceneLook;
 pub use config::{ConfigError, RandomizationConfig};
 pub use draw::EpisodeDraw;
+pub use spec::RandomizationSpec;
 
 /// Mixed into the env's seed so the randomization's stream is not the cube placement's.
 const STREAM: u64 = 0x5eed_d0e5_0000_0101;
