@@ -15,9 +15,11 @@ import argparse
 import os
 from pathlib import Path
 
-# The servo models the simulation knows by name (so101_core::servo::ServoModelChoice).
-SERVO_MODELS = ("sts3215", "gain80")
-DEFAULT_SERVO_MODEL = "sts3215"
+from . import contract
+
+# The servo models the simulation knows by name, and the one it uses unless told (so101_core::servo).
+SERVO_MODELS = contract.SERVO_MODELS
+DEFAULT_SERVO_MODEL = contract.DEFAULT_SERVO_MODEL
 
 RANDOMIZE_OFF = "off"
 RANDOMIZE_DEFAULT = "default"
