@@ -373,7 +373,7 @@ def test_diagnostics_report_every_servo_at_one_hertz(arm_factory, ros):
     # The rate it reports is never above the requested one, and a slower one is said in the status.
     cycle_rate = float(bus["cycle_rate_hz"])
     assert 0 < cycle_rate <= 210 and float(bus["requested_rate_hz"]) == 200.0, bus
-    if cycle_rate < 0.9 * 200:
+    if cycle_rate < 0.9 * 200 and level(last.status[0]) != 2:  # unless a fault (ERROR) is what it says
         assert "below the requested" in last.status[0].message, (last.status[0].message, bus)
     # A reply can miss its deadline when the emulator (realistic wire timing over a pty) is
     # starved of CPU on this 2-core machine; the bus retries it. Rare, never routine.

@@ -65,14 +65,16 @@ def test_expert_bags_become_a_lerobot_dataset_that_lerobot_loads_and_replays(
         timeout=300,
     )
     assert done.returncode == 0, done.stdout + done.stderr
-    assert "2 episode(s)" in done.stdout and "1 skipped" in done.stdout and "episode_000002" in done.stdout, done.stdout
+    # Nothing is lost: the cut episode is read from its MCAP file, and the summary says it was cut.
+    assert "3 episode(s)" in done.stdout and "0 skipped" in done.stdout, done.stdout
+    assert "episode_000002: no metadata.yaml (the recording was cut short)" in done.stdout, done.stdout
 
     from lerobot.datasets.lerobot_dataset import LeRobotDataset
 
     dataset = LeRobotDataset("local/so101_test", root=output)
     assert dataset.meta.info.codebase_version == "v3.0"
     assert dataset.meta.robot_type == "so_follower" and dataset.fps == 30
-    assert dataset.num_episodes == 2
+    assert dataset.num_episodes == 3
     assert dataset.features["observation.state"]["names"] == [f"{j}.pos" for j in JOINTS]
     assert dataset.features["observation.images.top"]["shape"] == (48, 64, 3)
     assert dataset.features["observation.images.top"]["dtype"] == "video"
@@ -177,7 +179,7 @@ def test_expert_bags_become_a_lerobot_dataset_that_lerobot_loads_and_replays(
     )
     assert done.returncode == 0, done.stdout + done.stderr
     scaled = LeRobotDataset("local/so101_small", root=small)
-    assert scaled.num_episodes == 2 and scaled.num_frames == dataset.num_frames
+    assert scaled.num_episodes == 3 and scaled.num_frames == dataset.num_frames
     assert [k for k in scaled.features if k.startswith("observation.")] == ["observation.state", "observation.images.top"]
     assert scaled.features["observation.images.top"]["shape"] == (24, 32, 3)
     assert tuple(scaled[0]["observation.images.top"].shape) == (3, 24, 32)
