@@ -2,6 +2,8 @@
 //! logic), and the ROS 2 plumbing (context from the environment, QoS presets, names under a
 //! namespace, sim clock, shutdown, logging mirrored to /rosout).
 
+#[cfg(feature = "bag")]
+pub mod bag_read;
 pub mod cli_values;
 pub mod command;
 pub mod contract;
