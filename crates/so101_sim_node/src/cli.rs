@@ -43,8 +43,9 @@ pub struct Args {
     /// Seed of the cube placement on /sim/reset: the same seed gives the same sequence of episodes.
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
-    /// Physics periods per second of sim time: the commanded targets are held for one period, and
-    /// /joint_states, /clock and the task topics are published once per period.
+    /// Control rate of the simulated arm in Hz (physics periods per second of sim time; not the
+    /// policy's rate): the commanded targets are held for one period, and /joint_states, /clock
+    /// and the task topics are published once per period.
     #[arg(long, default_value_t = DEFAULT_PERIOD_RATE_HZ, value_parser = parse_rate)]
     pub rate: f64,
     /// Sim time relative to wall time: a factor (1 = real time, 2 = twice as fast) or "max".
