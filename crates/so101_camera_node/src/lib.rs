@@ -8,6 +8,7 @@
 //!
 //! - [`controls`]: exposure, gain, white balance and focus as parameters and V4L2 controls;
 //! - [`calibration`]: camera_info from a camera_calibration YAML file;
+//! - [`fuzzing`]: the fuzz targets' bodies over the calibration YAML, the request and the JPEG check;
 //!
 //! The devices: [`v4l2`] (USB cameras through the `v4l` crate; [`v4l2::mapping`] and
 //! [`v4l2::discovery`] are its pure parts). The node: [`node`] (start, parameters, diagnostics)
@@ -21,6 +22,7 @@ pub mod controls;
 pub mod decode;
 pub mod device;
 pub mod fake;
+pub mod fuzzing;
 pub mod jpeg;
 pub mod messages;
 pub mod modes;

@@ -9,6 +9,7 @@ pub mod command;
 pub mod contract;
 pub mod episode_bag;
 pub mod expert;
+pub mod fuzzing;
 pub mod kinematics;
 pub mod robot;
 #[cfg(feature = "ros")]

@@ -7,6 +7,7 @@
 //! - `servo`: one servo's control table and shaft physics (pure).
 //! - `dynamics`: the shaft moved by the STS3215 model of so101_core::servo (pure).
 //! - `bus`: the servos on one bus, instruction semantics, faults and wire timing (pure).
+//! - `fuzzing`: the fuzz target's body over instruction packets (pure).
 //! - `control`: the runtime control commands (`move 1 2048`, `drop 0.1`, `dump`, ...) (pure).
 //! - `in_process`: the bus as an in-process transport (the driver's `Connector`), for the driver's
 //!   tests (I/O-free).
@@ -17,6 +18,7 @@ pub mod bus;
 pub mod control;
 pub mod dynamics;
 pub mod error;
+pub mod fuzzing;
 pub mod in_process;
 pub mod pty;
 pub mod servo;

@@ -7,6 +7,7 @@
 pub mod apply;
 pub mod config;
 pub mod draw;
+pub mod fuzzing;
 pub mod spec;
 
 use rand::{RngCore, SeedableRng};

@@ -1,0 +1,3 @@
+#![no_main]
+
+libfuzzer_sys::fuzz_target!(|data: &[u8]| so101_camera_node::fuzzing::calibration_yaml(data));
