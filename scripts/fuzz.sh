@@ -28,7 +28,7 @@ fuzz_one() {
         -max_total_time="${seconds}" -timeout=5 -rss_limit_mb=2048 -malloc_limit_mb=512 \
         -print_final_stats=1) >"${log}" 2>&1 || status=FINDING
     local executions
-    executions="$(sed -n 's/^Done \([0-9]*\) runs in .*/\1/p' "${log}" | tail -n1)"
+    executions="$(sed -n 's/^stat::number_of_executed_units: *\([0-9]*\)/\1/p' "${log}" | tail -n1)"
     if [ "${status}" = ok ]; then
         (cd "${FUZZ_DIR}" && cargo +nightly fuzz cmin "${target}" "${corpus}") >>"${log}" 2>&1
     fi
