@@ -11,6 +11,11 @@ pub const DEFAULT_TOML: &str = include_str!("../../../../assets/randomization.to
 /// A closed interval to draw from uniformly.
 pub type Range = [f64; 2];
 
+/// The largest value a range or a jitter may take: far beyond any sensible setting (a scale of a
+/// thousand, a metre of camera jitter is already absurd), and small enough that every draw stays
+/// finite, also where it is narrowed to f32 for MuJoCo (a file allowing 1e300 gave an infinite light).
+pub const MAX_SETTING: f64 = 1e3;
+
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct RandomizationConfig {
@@ -123,6 +128,7 @@ impl RandomizationConfig {
     }
 
     /// Ranges ordered and finite, scales positive, jitters and noise not negative.
+    /// Every range and amount must be finite, not negative and at most [`MAX_SETTING`].
     fn check(&self) -> Result<(), String> {
         let ranges = [
             ("cube.size_scale", self.cube.size_scale, true),
@@ -142,9 +148,9 @@ impl RandomizationConfig {
         ];
         for (name, [low, high], positive) in ranges {
             let floor_ok = if positive { low > 0.0 } else { low >= 0.0 };
-            if !(low.is_finite() && high.is_finite() && low <= high && floor_ok) {
+            if !(low.is_finite() && high <= MAX_SETTING && low <= high && floor_ok) {
                 return Err(format!(
-                    "{name} = [{low}, {high}] must be finite, low <= high, and low {}",
+                    "{name} = [{low}, {high}] must be finite, low <= high <= {MAX_SETTING}, and low {}",
                     if positive { "> 0" } else { ">= 0" }
                 ));
             }
@@ -166,8 +172,8 @@ impl RandomizationConfig {
             ),
         ];
         for (name, value) in amounts {
-            if !(value.is_finite() && value >= 0.0) {
-                return Err(format!("{name} = {value} must be finite and not negative"));
+            if !(value.is_finite() && (0.0..=MAX_SETTING).contains(&value)) {
+                return Err(format!("{name} = {value} must be from 0 to {MAX_SETTING}"));
             }
         }
         Ok(())
@@ -177,6 +183,26 @@ impl RandomizationConfig {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn huge_ranges_and_jitters_are_refused_not_drawn_to_infinity() {
+        // Found by the randomization_toml fuzz target: an ambient range up to about 6.7e84 was
+        // accepted, and its draw, narrowed to f32 for MuJoCo, was infinite.
+        let error =
+            RandomizationConfig::from_toml("[lighting]\nambient = [1.12, 6.6e84]\n", "test")
+                .unwrap_err()
+                .to_string();
+        assert!(
+            error.contains("lighting.ambient") && error.contains("1000"),
+            "{error}"
+        );
+        let error = RandomizationConfig::from_toml("[cameras]\nposition_jitter = 1e300\n", "test")
+            .unwrap_err()
+            .to_string();
+        assert!(error.contains("cameras.position_jitter"), "{error}");
+        let bytes = b"[lighting]\nambient = [1.12, 66666666666666666666666666666666666666666666666666666666666666666666666666666666666660.40]\n";
+        crate::randomization::fuzzing::randomization_toml(bytes);
+    }
 
     #[test]
     fn a_users_file_overrides_only_its_keys() {
