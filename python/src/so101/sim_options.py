@@ -59,6 +59,26 @@ def _existing_file(value: str | os.PathLike, suffix: str | None, option: str, ac
     return str(path.resolve())
 
 
+def add_arguments(parser: argparse.ArgumentParser | argparse._ArgumentGroup) -> None:
+    """--servo-params and --randomize as every CLI that starts a simulation takes them."""
+    parser.add_argument(
+        "--servo-params",
+        type=servo_params_argument,
+        default=DEFAULT_SERVO_MODEL,
+        help=f"the sim's servo model: {', '.join(SERVO_MODELS)} or a so101-sysid fit file (default {DEFAULT_SERVO_MODEL})",
+    )
+    parser.add_argument(
+        "--randomize",
+        type=randomize_argument,
+        nargs="?",
+        const=RANDOMIZE_DEFAULT,
+        default=RANDOMIZE_OFF,
+        metavar="RANGES",
+        help="domain randomization of every episode, seeded by its seed: the default ranges "
+        "(assets/randomization.toml; also `true`), `off`/`false`, or a .toml of your own",
+    )
+
+
 def randomize_argument(text: str) -> str:
     """argparse's `type` for --randomize: the error names the accepted forms."""
     return _argument(randomize_spec, text)

@@ -23,10 +23,9 @@ from pathlib import Path
 
 import numpy as np
 
-from .. import contract
+from .. import contract, sim_options
 from ..envs.spaces import reward_mode
 from ..messages import cube_pose_vector, joint_positions, rgb_image
-from ..sim_options import DEFAULT_SERVO_MODEL, randomize_argument, servo_params_argument
 from ..stack.rclpy_wait import spin_until
 from ..units import JOINT_LIMITS, JOINT_NAMES
 from .policy import PolicyError, StackPolicy
@@ -326,22 +325,7 @@ def parser() -> argparse.ArgumentParser:
         "which shows how close a failed episode came",
     )
     ev.add_argument("--lite", action="store_true", help="sim without meshes (faster to render on a CPU)")
-    ev.add_argument(
-        "--servo-params",
-        type=servo_params_argument,
-        default=DEFAULT_SERVO_MODEL,
-        help=f"the sim's servo model: sts3215, gain80, or a parameter file from so101-sysid fit (default {DEFAULT_SERVO_MODEL})",
-    )
-    ev.add_argument(
-        "--randomize",
-        type=randomize_argument,
-        nargs="?",
-        const="default",
-        default="off",
-        metavar="RANGES",
-        help="domain randomization of every episode, seeded by its seed: the default ranges "
-        "(assets/randomization.toml; also `true`), `off`/`false`, or a .toml of your own",
-    )
+    sim_options.add_arguments(ev)
     ev.add_argument(
         "--video-camera",
         default=None,

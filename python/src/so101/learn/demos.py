@@ -23,9 +23,8 @@ import sys
 import time
 from pathlib import Path
 
-from .. import contract
+from .. import contract, sim_options
 from ..paths import repo_root
-from ..sim_options import DEFAULT_SERVO_MODEL, randomize_argument, servo_params_argument
 
 REPO_ID = "local/so101_demos"
 
@@ -51,22 +50,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         help="the sim's lite scene (no meshes), far faster to render on a CPU; a camera policy trained on it is "
         "evaluated on it too (so101-run-policy --lite, as the recipes do)",
     )
-    p.add_argument(
-        "--servo-params",
-        type=servo_params_argument,
-        default=DEFAULT_SERVO_MODEL,
-        help="the sim's servo model: sts3215, gain80 or a so101-sysid fit file",
-    )
-    p.add_argument(
-        "--randomize",
-        type=randomize_argument,
-        nargs="?",
-        const="default",
-        default="off",
-        metavar="RANGES",
-        help="domain randomization of every episode: the default ranges (assets/randomization.toml; "
-        "also `true` or `default`), `off`/`false`, or a .toml",
-    )
+    sim_options.add_arguments(p)
     p.add_argument("--speed", type=float, default=None, help="sim speed (default 8 without cameras, else 4)")
     p.add_argument("--keep-failures", action="store_true", help="keep episodes the expert failed")
     p.add_argument("--repo-id", default=REPO_ID, help="the dataset's repo id")
