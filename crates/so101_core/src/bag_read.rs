@@ -34,46 +34,168 @@ pub enum ReadError<E> {
 pub fn read_messages<E>(
     mut input: impl Read,
     record_length_limit: usize,
-    mut on_message: impl FnMut(&str, &[u8]) -> Result<(), E>,
+    on_message: impl FnMut(&str, &[u8]) -> Result<(), E>,
 ) -> Result<Option<String>, ReadError<E>> {
-    let options = LinearReaderOptions::default().with_record_length_limit(record_length_limit);
+    // Chunks come whole and are opened here: mcap's own walk through an uncompressed chunk
+    // subtracts a record's claimed length from what the chunk holds without a check (a record
+    // running past its chunk overflows), so each record's length is checked against its chunk.
+    let options = LinearReaderOptions::default()
+        .with_record_length_limit(record_length_limit)
+        .with_emit_chunks(true);
     let mut reader = LinearReader::new_with_options(options);
-    // Channel id -> topic, as the file declares them before their messages.
-    let mut topics: HashMap<u16, String> = HashMap::new();
+    let mut records = Records {
+        topics: HashMap::new(),
+        on_message,
+        record_length_limit,
+    };
     while let Some(event) = reader.next_event() {
-        let record = match event {
+        let ended = match event {
             Ok(LinearReadEvent::ReadRequest(wanted)) => {
                 let buffer = reader.insert(wanted.min(READ_SIZE));
                 let read = input.read(buffer).map_err(ReadError::Read)?;
                 reader.notify_read(read);
                 continue;
             }
-            // Only channels and messages are parsed: mcap's parser reserves what a string's length
-            // prefix claims before reading it (a 30-byte header record claiming a 1.3 GB profile
-            // string), so the records whose strings this reader needs are parsed here, checked.
-            Ok(LinearReadEvent::Record { data, opcode }) => match opcode {
-                op::CHANNEL => match channel(data) {
-                    Some((id, topic)) => {
-                        topics.insert(id, topic);
-                        continue;
-                    }
-                    None => return Ok(Some("a channel record is malformed".to_owned())),
-                },
-                op::MESSAGE => mcap::parse_record(opcode, data),
-                _ => continue,
-            },
-            Err(error) => Err(error),
+            Ok(LinearReadEvent::Record { data, opcode }) => records.record(opcode, data)?,
+            Err(error) => Some(error.to_string()),
         };
-        match record {
-            Ok(Record::Message { header, data }) => {
-                let topic = topics.get(&header.channel_id).map_or("", String::as_str);
-                on_message(topic, &data).map_err(ReadError::Handler)?;
-            }
-            Ok(_) => {}
-            Err(error) => return Ok(Some(error.to_string())),
+        if ended.is_some() {
+            return Ok(ended);
         }
     }
     Ok(None)
+}
+
+/// What the records read so far declared, and where messages go.
+struct Records<F> {
+    /// Channel id -> topic, as the file declares them before their messages.
+    topics: HashMap<u16, String>,
+    on_message: F,
+    record_length_limit: usize,
+}
+
+impl<F> Records<F> {
+    /// Takes one record (a chunk's records in turn); Some(why) where the file can be read no
+    /// further.
+    fn record<E>(&mut self, opcode: u8, data: &[u8]) -> Result<Option<String>, ReadError<E>>
+    where
+        F: FnMut(&str, &[u8]) -> Result<(), E>,
+    {
+        // Only channels and messages are parsed: mcap's parser reserves what a string's length
+        // prefix claims before reading it (a 30-byte header record claiming a 1.3 GB profile
+        // string), so the records whose strings this reader needs are parsed here, checked.
+        match opcode {
+            op::CHANNEL => match channel(data) {
+                Some((id, topic)) => {
+                    self.topics.insert(id, topic);
+                }
+                None => return Ok(Some("a channel record is malformed".to_owned())),
+            },
+            op::MESSAGE => match mcap::parse_record(opcode, data) {
+                Ok(Record::Message { header, data }) => {
+                    let topic = self
+                        .topics
+                        .get(&header.channel_id)
+                        .map_or("", String::as_str);
+                    (self.on_message)(topic, &data).map_err(ReadError::Handler)?;
+                }
+                Ok(_) => {}
+                Err(error) => return Ok(Some(error.to_string())),
+            },
+            op::CHUNK => {
+                let records = match chunk_records(data, self.record_length_limit) {
+                    Ok(records) => records,
+                    Err(why) => return Ok(Some(why)),
+                };
+                let mut rest = records.as_slice();
+                while !rest.is_empty() {
+                    let Some((opcode, data, after)) = next_record(rest) else {
+                        return Ok(Some("a record runs past the end of its chunk".to_owned()));
+                    };
+                    if opcode == op::CHUNK {
+                        return Ok(Some("a chunk holds a chunk".to_owned()));
+                    }
+                    if let Some(why) = self.record(opcode, data)? {
+                        return Ok(Some(why));
+                    }
+                    rest = after;
+                }
+            }
+            _ => {}
+        }
+        Ok(None)
+    }
+}
+
+/// The first record of `records` (opcode, its data, what follows it), or None where its length
+/// runs past the end.
+fn next_record(records: &[u8]) -> Option<(u8, &[u8], &[u8])> {
+    let (&opcode, rest) = records.split_first()?;
+    let (length, rest) = rest.split_first_chunk::<8>()?;
+    let length = usize::try_from(u64::from_le_bytes(*length)).ok()?;
+    (length <= rest.len()).then(|| (opcode, &rest[..length], &rest[length..]))
+}
+
+/// A chunk record's records, decompressed and checked against the chunk's CRC (MCAP: start and end
+/// time u64, uncompressed size u64, uncompressed CRC u32 (0: none), compression as a u32-prefixed
+/// string, records length u64, records). Memory stays within what the chunk claims and the limit.
+fn chunk_records(chunk: &[u8], limit: usize) -> Result<Vec<u8>, String> {
+    let malformed = || "a chunk record is malformed".to_owned();
+    let uncompressed_size = u64::from_le_bytes(field(chunk, 16).ok_or_else(malformed)?);
+    let crc = u32::from_le_bytes(field(chunk, 24).ok_or_else(malformed)?);
+    let compression_length = u32::from_le_bytes(field(chunk, 28).ok_or_else(malformed)?);
+    let compression_end = usize::try_from(compression_length)
+        .ok()
+        .and_then(|length| length.checked_add(32))
+        .ok_or_else(malformed)?;
+    let compression = chunk.get(32..compression_end).ok_or_else(malformed)?;
+    let records_length = u64::from_le_bytes(field(chunk, compression_end).ok_or_else(malformed)?);
+    let compressed = usize::try_from(records_length)
+        .ok()
+        .and_then(|length| chunk.get(compression_end + 8..)?.get(..length))
+        .ok_or_else(malformed)?;
+    let size = usize::try_from(uncompressed_size)
+        .ok()
+        .filter(|&size| size <= limit)
+        .ok_or_else(|| {
+            format!("a chunk claims {uncompressed_size} bytes, over the limit of {limit}")
+        })?;
+    let records = match compression {
+        b"" => compressed.to_vec(),
+        b"zstd" => decompress(zstd::stream::read::Decoder::with_buffer(compressed), size)?,
+        b"lz4" => decompress(lz4::Decoder::new(compressed), size)?,
+        other => {
+            let other = String::from_utf8_lossy(other);
+            return Err(format!(
+                "a chunk compressed as {other:?}, which this reader does not know"
+            ));
+        }
+    };
+    if records.len() != size {
+        let held = records.len();
+        return Err(format!(
+            "a chunk holds {held} bytes of records, not the {size} it claims"
+        ));
+    }
+    if crc != 0 && crc32fast::hash(&records) != crc {
+        return Err("a chunk's records do not match its CRC".to_owned());
+    }
+    Ok(records)
+}
+
+/// The `N` little-endian bytes at `at`, where the record holds them.
+fn field<const N: usize>(record: &[u8], at: usize) -> Option<[u8; N]> {
+    record.get(at..)?.first_chunk().copied()
+}
+
+/// At most `size` bytes (and one more, to tell a chunk that holds more) from a decompressor; the
+/// buffer grows with what it really yields, not with what the chunk claims.
+fn decompress(decoder: Result<impl Read, std::io::Error>, size: usize) -> Result<Vec<u8>, String> {
+    let mut records = Vec::new();
+    decoder
+        .and_then(|decoder| decoder.take(size as u64 + 1).read_to_end(&mut records))
+        .map_err(|error| format!("a chunk does not decompress: {error}"))?;
+    Ok(records)
 }
 
 /// A channel record's id and topic (MCAP: id u16, schema id u16, topic as a u32 length and UTF-8
@@ -167,10 +289,52 @@ mod tests {
         );
     }
 
+    /// An uncompressed chunk record (CRC 0: unchecked) around `records`.
+    fn chunk(records: &[u8]) -> Vec<u8> {
+        let mut chunk = [0u8; 16].to_vec();
+        chunk.extend((records.len() as u64).to_le_bytes());
+        chunk.extend(0u32.to_le_bytes());
+        chunk.extend(0u32.to_le_bytes());
+        chunk.extend((records.len() as u64).to_le_bytes());
+        chunk.extend(records);
+        chunk
+    }
+
     #[test]
-    fn channels_and_messages_are_read_from_a_file_the_mcap_writer_wrote() {
+    fn a_record_running_past_its_chunk_ends_the_file() {
+        // Found by the episode_bag_mcap fuzz target: in an uncompressed chunk, a record claiming
+        // more than the chunk holds; mcap subtracted its length from the chunk's (an overflow,
+        // a panic in debug builds) and read on past the chunk as if it were inside it.
+        let mut records = vec![op::CHANNEL];
+        records.extend(40u64.to_le_bytes());
+        records.extend([1, 0, 0, 0, 2, 0, 0, 0, b'/', b'a']);
+        let chunk = chunk(&records);
+        let mut file = file_with_record(op::CHUNK, chunk.len() as u64);
+        file.extend(chunk);
+        file.extend([0; 64]);
+        let ended = read_messages(file.as_slice(), RECORD_LENGTH_LIMIT, no_messages);
+        assert_eq!(
+            ended.expect("reads from memory").as_deref(),
+            Some("a record runs past the end of its chunk")
+        );
+    }
+
+    #[test]
+    fn a_chunk_claiming_more_than_the_limit_is_refused_unopened() {
+        let mut chunk = chunk(&[]);
+        chunk[16..24].copy_from_slice(&(1u64 << 40).to_le_bytes());
+        let mut file = file_with_record(op::CHUNK, chunk.len() as u64);
+        file.extend(chunk);
+        let ended = read_messages(file.as_slice(), 1 << 20, no_messages);
+        let ended = ended.expect("reads from memory").expect("ended early");
+        assert!(ended.contains("over the limit"), "{ended}");
+    }
+
+    /// A bag of three messages on /task/reward, as mcap's writer writes it with `compression`.
+    fn written_with(compression: Option<mcap::Compression>) -> Vec<u8> {
         let mut file = std::io::Cursor::new(Vec::new());
-        let mut writer = mcap::Writer::new(&mut file).expect("a writer");
+        let options = mcap::WriteOptions::new().compression(compression);
+        let mut writer = options.create(&mut file).expect("a writer");
         let channel = writer
             .add_channel(0, "/task/reward", "cdr", &Default::default())
             .expect("a channel");
@@ -187,18 +351,47 @@ mod tests {
         }
         writer.finish().expect("finished");
         drop(writer);
-        let mut seen = Vec::new();
-        let ended = read_messages(
-            file.get_ref().as_slice(),
-            RECORD_LENGTH_LIMIT,
-            |topic, data| {
+        file.into_inner()
+    }
+
+    #[test]
+    fn channels_and_messages_are_read_from_every_compression_the_mcap_writer_writes() {
+        use mcap::Compression::{Lz4, Zstd};
+        for compression in [None, Some(Zstd), Some(Lz4)] {
+            let file = written_with(compression);
+            let mut seen = Vec::new();
+            let ended = read_messages(file.as_slice(), RECORD_LENGTH_LIMIT, |topic, data| {
                 seen.push((topic.to_owned(), data[0]));
                 Ok::<(), ()>(())
-            },
+            });
+            assert_eq!(ended.expect("reads from memory"), None, "{compression:?}");
+            let topic = "/task/reward".to_owned();
+            let expected = [(topic.clone(), 0), (topic.clone(), 1), (topic, 2)];
+            assert_eq!(seen, expected, "{compression:?}");
+        }
+    }
+
+    #[test]
+    fn a_chunk_whose_records_do_not_match_its_crc_ends_the_file() {
+        let mut file = written_with(None);
+        // The last byte of the third message's payload, inside the one chunk.
+        let at = file
+            .windows(12)
+            .position(|w| w == [2; 12])
+            .expect("the payload")
+            + 11;
+        file[at] ^= 0xFF;
+        let mut seen = 0;
+        let ended = read_messages(file.as_slice(), RECORD_LENGTH_LIMIT, |_, _| {
+            seen += 1;
+            Ok::<(), ()>(())
+        });
+        let ended = ended.expect("reads from memory");
+        assert_eq!(
+            ended.as_deref(),
+            Some("a chunk's records do not match its CRC")
         );
-        assert_eq!(ended.expect("reads from memory"), None);
-        let topic = "/task/reward".to_owned();
-        assert_eq!(seen, [(topic.clone(), 0), (topic.clone(), 1), (topic, 2)]);
+        assert_eq!(seen, 0, "no message of a damaged chunk is handed over");
     }
 
     #[test]
