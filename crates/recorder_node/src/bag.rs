@@ -715,19 +715,30 @@ fn next_free_index(dir: &Path, prefix: &str) -> u64 {
 }
 
 #[cfg(test)]
-mod tests {
-    use super::*;
-
-    fn options(dir: &Path) -> BagOptions {
-        BagOptions {
-            output: dir.to_owned(),
+impl BagOptions {
+    /// What the unit tests record with: small chunks, no compression, no split.
+    pub(crate) fn for_tests(output: &Path) -> Self {
+        Self {
+            output: output.to_owned(),
             prefix: so101_core::episode_bag::DEFAULT_PREFIX.into(),
             compression: None,
             chunk_size: 1024,
             max_chunk_age: Duration::from_secs(1),
             split_size: None,
-            split_duration: Some(Duration::from_secs(1)),
+            split_duration: None,
             default_task: "test".into(),
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn options(dir: &Path) -> BagOptions {
+        BagOptions {
+            split_duration: Some(Duration::from_secs(1)),
+            ..BagOptions::for_tests(dir)
         }
     }
 

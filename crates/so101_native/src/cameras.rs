@@ -12,7 +12,7 @@ use pyo3::{
 use so101_sim::{
     cameras::{
         rig::{CameraRig, Capture, FrameBatch, RigOptions},
-        spec::{CameraSpec, FrameSize},
+        spec::{CameraSpec, FrameSize, MAX_SIDE},
     },
     env::TaskEnv,
     offscreen::RendererChoice,
@@ -51,9 +51,10 @@ impl CameraSet {
         }
         let mut specs = Vec::with_capacity(cameras.len());
         for (name, (height, width)) in cameras {
-            if *width == 0 || *height == 0 || *width > 4096 || *height > 4096 {
+            if *width == 0 || *height == 0 || *width > MAX_SIDE || *height > MAX_SIDE {
                 return Err(PyValueError::new_err(format!(
-                    "camera {name}: {width}x{height} is not a frame size from 1x1 to 4096x4096"
+                    "camera {name}: {width}x{height} is not a frame size from 1x1 to \
+                     {MAX_SIDE}x{MAX_SIDE}"
                 )));
             }
             specs.push(CameraSpec {

@@ -32,10 +32,7 @@ impl WorldSpec {
             kind: options.task,
             dense_reward: options.dense_reward,
         };
-        let sim_options = SimOptions {
-            servos: options.servo_params.choice().clone(),
-            randomization: options.randomize.config().cloned(),
-        };
+        let sim_options = SimOptions::from_specs(&options.servo_params, &options.randomize);
         TaskEnv::with_options(
             simulation,
             options.control_rate,

@@ -4,13 +4,16 @@
 
 use so101_core::{
     robot::{JointPositions, JOINT_COUNT},
-    servo::{ArmServoParams, ServoModelChoice},
+    servo::{ArmServoParams, ServoModelChoice, ServoModelSpec},
 };
 
 use crate::{
     mujoco::Simulation,
     placement::{CubePlacer, CubeStart, SpawnArea},
-    randomization::{EpisodeDraw, ObservationNoise, RandomizationConfig, Randomizer, SceneLook},
+    randomization::{
+        EpisodeDraw, ObservationNoise, RandomizationConfig, RandomizationSpec, Randomizer,
+        SceneLook,
+    },
     task::{self, TaskKind, TaskOutcome},
     world::{ArmState, CubePose, World, WorldError},
 };
@@ -67,6 +70,16 @@ pub const STATE_SIZE: usize = 2 * JOINT_COUNT + 7;
 pub struct SimOptions {
     pub servos: ServoModelChoice,
     pub randomization: Option<RandomizationConfig>,
+}
+
+impl SimOptions {
+    /// The options a user chose (`--servo-params`, `--randomize`, or their Python keywords).
+    pub fn from_specs(servos: &ServoModelSpec, randomization: &RandomizationSpec) -> Self {
+        Self {
+            servos: servos.choice().clone(),
+            randomization: randomization.config().cloned(),
+        }
+    }
 }
 
 /// The randomization of an env: its draws, the scene's nominal look and servos, and the current

@@ -55,10 +55,7 @@ pub fn run(args: Args) -> Result<()> {
         kind: args.task,
         dense_reward: args.dense_reward,
     };
-    let options = SimOptions {
-        servos: args.servo_params.choice().clone(),
-        randomization: args.randomize.config().cloned(),
-    };
+    let options = SimOptions::from_specs(&args.servo_params, &args.randomize);
     let env = TaskEnv::with_options(simulation, args.rate, settings, args.seed, options)
         .context("the scene does not fit the node")?;
     let time_mode = if args.lockstep {

@@ -173,17 +173,7 @@ mod tests {
     use crate::{bag::BagOptions, metadata::QosSummary};
 
     fn bag(dir: &std::path::Path) -> BagWriter {
-        BagWriter::new(BagOptions {
-            output: dir.to_owned(),
-            prefix: so101_core::episode_bag::DEFAULT_PREFIX.into(),
-            compression: None,
-            chunk_size: 1024,
-            max_chunk_age: Duration::from_secs(1),
-            split_size: None,
-            split_duration: None,
-            default_task: "test".into(),
-        })
-        .unwrap()
+        BagWriter::new(BagOptions::for_tests(dir)).unwrap()
     }
 
     /// Carries out `command` with a reply and returns the answer.

@@ -16,7 +16,7 @@ impl fmt::Display for FrameSize {
 }
 
 /// Largest frame side accepted (MuJoCo's offscreen buffer is one GL renderbuffer).
-const MAX_SIDE: u32 = 4096;
+pub const MAX_SIDE: u32 = 4096;
 /// Highest camera rate accepted, frames per second of sim time.
 pub const MAX_RATE: f64 = 1000.0;
 /// Lowest camera rate (frames/s): one frame every 10 s.

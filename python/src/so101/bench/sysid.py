@@ -1,7 +1,7 @@
 """Identification against ground truth: the servo-bus emulator stands in for the arm with known,
 non-default servo parameters (TRUTH below); `so101-sysid record` drives every joint through the
 driver and records, `fit` identifies the parameters, `compare` replays the held-out motions in the
-simulation before (the sts3215 preset) and after the fit. Prints each parameter's relative error
+simulation before (the default servo model) and after the fit. Prints each parameter's relative error
 and the headline `identification error: N %` (the largest over the fitted parameters).
 
     so101-bench sysid [--output DIR] [--joints a,b]   (inside scripts/isolated, or it isolates itself)
@@ -20,7 +20,9 @@ from pathlib import Path
 from .. import contract
 from ..subcommands import Subcommand, run_alone
 
-# The emulated arm's truth, relative to the sts3215 preset: every fitted parameter moved.
+# What the fit starts from and is compared with: the default servo model.
+PRESET = contract.DEFAULT_SERVO_MODEL
+# The emulated arm's truth, relative to the preset: every fitted parameter moved.
 TRUTH = {"gain_per_p": 0.5, "damping": 1.6, "friction": 2.0, "armature": 1.4}
 TRUTH_LATENCY = 0.020  # s
 TRUTH_DEAD_ZONE = 2.0  # ticks, CW and CCW
@@ -31,7 +33,7 @@ def truth_params() -> dict:
     """The parameter file of the emulated arm."""
     import so101_native
 
-    params = json.loads(so101_native.servo_params_json("sts3215"))
+    params = json.loads(so101_native.servo_params_json(PRESET))
     for joint in params["joints"].values():
         for name, factor in TRUTH.items():
             joint["mechanics"][name] *= factor
@@ -96,7 +98,7 @@ def run(args: argparse.Namespace) -> int:
         "--tasks",
         "so101-sysid",
         "--servo-params",
-        "sts3215",
+        PRESET,
         "--servo-params",
         output / "fit.json",
         "--json",
@@ -111,7 +113,7 @@ def run(args: argparse.Namespace) -> int:
             continue
         joint = task.split()[1]
         index = contract.JOINT_NAMES.index(joint)
-        before, after = result["sts3215"], result[str(output / "fit.json")]
+        before, after = result[PRESET], result[str(output / "fit.json")]
         print(
             f"| {joint} | {1000 * before['rms_rad'][index]:.2f} / {1000 * after['rms_rad'][index]:.2f} | "
             f"{before['gripper_rms_mm']:.2f} / {after['gripper_rms_mm']:.2f} |"
