@@ -242,16 +242,19 @@ def test_the_keyboard_drives_the_arm_through_a_real_terminal(sim_factory, ros, t
                 screen += os.read(controller, 4096)
         assert b"shoulder_pan" in screen, f"no key help on screen: {screen[-500:]!r}"
         commands.wait_count(5, 20.0, running.sim)
-        before = positions_by_name(commands.latest())
+        before, since = positions_by_name(commands.latest()), time.monotonic()
         # Right arrow held for ~1 s (a press, then auto-repeat every 30 ms).
         end = time.monotonic() + 1.0
         while time.monotonic() < end:
             os.write(controller, b"\x1b[C")
             time.sleep(0.03)
         time.sleep(1.0)  # the hold runs out: motion stops
-        after = positions_by_name(commands.latest())
+        after, elapsed = positions_by_name(commands.latest()), time.monotonic() - since
         moved = after["shoulder_pan"] - before["shoulder_pan"]
-        assert 0.4 <= moved <= 0.85, f"shoulder_pan moved {moved:.3f} rad for ~1 s of Right at 0.5 rad/s (+ hold)"
+        # The held key moved the joint the right way for at least the press's hold (0.55 s at
+        # 0.5 rad/s), and never faster than 0.5 rad/s of the time that passed, however busy the
+        # machine (teleop's periods never run ahead of the clock; one period's step of slack).
+        assert 0.25 <= moved <= 0.5 * elapsed + 0.01, f"shoulder_pan moved {moved:.3f} rad in {elapsed:.2f} s"
         time.sleep(0.3)
         assert positions_by_name(commands.latest()) == after, "still moving after the key was let go"
         os.write(controller, b"\r")  # Enter: start recording
