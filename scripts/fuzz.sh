@@ -6,7 +6,8 @@
 #   scripts/fuzz.sh list                 the targets
 # Needs a nightly toolchain and cargo-fuzz (`rustup toolchain install nightly`, `cargo install cargo-fuzz
 # --locked`). Builds into fuzz/target (release, debug assertions, AddressSanitizer), runs from and adds
-# to fuzz/corpus/TARGET, then minimizes that corpus (cmin) so what is committed stays small. A crash,
+# to fuzz/corpus/TARGET, then minimizes that corpus (cmin) so what is committed stays small. A finding's
+# reproducer, once fixed, goes to fuzz/regressions/TARGET/ under a name that says what it found. A crash,
 # panic, hang (-timeout=5 s), allocation over 512 MB or RSS over 2 GB stops the run with its input
 # in fuzz/artifacts/TARGET/. Logs: $FUZZ_LOG_DIR (logs/fuzz). The last line per target:
 #   TARGET executions=N seconds=S corpus_files=F corpus_bytes=B status=ok|FINDING
@@ -22,9 +23,12 @@ targets() { sed -n 's/^name = "\(.*\)"$/\1/p' "${FUZZ_DIR}/Cargo.toml" | grep -v
 
 fuzz_one() {
     local target="$1" seconds="$2" log="${LOG_DIR}/$1.log" corpus="${FUZZ_DIR}/corpus/$1" status=ok
+    local seeds=()
     mkdir -p "${corpus}"
+    # Findings' reproducers (fuzz/regressions/TARGET/) seed the run but stay out of cmin's reach.
+    [ -d "${FUZZ_DIR}/regressions/$1" ] && seeds+=("${FUZZ_DIR}/regressions/$1")
     echo "fuzz: ${target} for ${seconds} s (log ${log})"
-    (cd "${FUZZ_DIR}" && cargo +nightly fuzz run "${target}" "${corpus}" -- \
+    (cd "${FUZZ_DIR}" && cargo +nightly fuzz run "${target}" "${corpus}" "${seeds[@]}" -- \
         -max_total_time="${seconds}" -timeout=5 -rss_limit_mb=2048 -malloc_limit_mb=512 \
         -print_final_stats=1) >"${log}" 2>&1 || status=FINDING
     local executions

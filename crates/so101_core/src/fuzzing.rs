@@ -7,21 +7,32 @@ use std::path::{Path, PathBuf};
 
 use crate::servo::ArmServoParams;
 
-/// fuzz/corpus/<target>/ of this checkout: the inputs the fuzzer kept, seeds and findings' reproducers.
+/// fuzz/corpus/<target>/ of this checkout: the inputs the fuzzer kept (minimized by cmin, which
+/// renames and drops inputs at will).
 pub fn corpus_dir(target: &str) -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("../../fuzz/corpus")
-        .join(target)
+    fuzz_dir().join("corpus").join(target)
 }
 
-/// Runs every file of the target's corpus through `run` (the target's body): the replay of the
-/// corpora in the ordinary test suite. Returns how many inputs ran; panics on an empty corpus.
+/// fuzz/regressions/<target>/: each finding's reproducer, under a name that says what it found;
+/// kept apart from the corpus so minimizing it can never drop one.
+pub fn regressions_dir(target: &str) -> PathBuf {
+    fuzz_dir().join("regressions").join(target)
+}
+
+fn fuzz_dir() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("../../fuzz")
+}
+
+/// Runs every file of the target's corpus and of its regressions (where it has any) through `run`
+/// (the target's body): the replay of the corpora in the ordinary test suite. Returns how many
+/// inputs ran; panics on an empty corpus.
 pub fn replay_corpus(target: &str, run: fn(&[u8])) -> usize {
-    let dir = corpus_dir(target);
-    let entries = std::fs::read_dir(&dir)
-        .unwrap_or_else(|error| panic!("cannot read the corpus {}: {error}", dir.display()));
+    let corpus = corpus_dir(target);
+    let entries = std::fs::read_dir(&corpus)
+        .unwrap_or_else(|error| panic!("cannot read the corpus {}: {error}", corpus.display()));
+    let regressions = std::fs::read_dir(regressions_dir(target)).into_iter().flatten();
     let mut count = 0;
-    for entry in entries {
+    for entry in entries.chain(regressions) {
         let path = entry.expect("a corpus directory entry").path();
         let data = std::fs::read(&path)
             .unwrap_or_else(|error| panic!("cannot read {}: {error}", path.display()));
@@ -30,7 +41,7 @@ pub fn replay_corpus(target: &str, run: fn(&[u8])) -> usize {
         run(&data);
         count += 1;
     }
-    assert!(count > 0, "{} holds no input", dir.display());
+    assert!(count > 0, "{} holds no input", corpus.display());
     count
 }
 
