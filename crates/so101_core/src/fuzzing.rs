@@ -30,7 +30,9 @@ pub fn replay_corpus(target: &str, run: fn(&[u8])) -> usize {
     let corpus = corpus_dir(target);
     let entries = std::fs::read_dir(&corpus)
         .unwrap_or_else(|error| panic!("cannot read the corpus {}: {error}", corpus.display()));
-    let regressions = std::fs::read_dir(regressions_dir(target)).into_iter().flatten();
+    let regressions = std::fs::read_dir(regressions_dir(target))
+        .into_iter()
+        .flatten();
     let mut count = 0;
     for entry in entries.chain(regressions) {
         let path = entry.expect("a corpus directory entry").path();
