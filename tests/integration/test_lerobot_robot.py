@@ -18,6 +18,7 @@ import math
 import os
 import shutil
 import signal
+import socket
 import subprocess
 import sys
 import time
@@ -252,6 +253,12 @@ def tiny_act(recording) -> Path:
     return checkpoint
 
 
+def listening(port: int) -> bool:
+    """Whether something accepts TCP connections on 127.0.0.1:port."""
+    with socket.socket() as probe:
+        return probe.connect_ex(("127.0.0.1", port)) == 0
+
+
 def test_async_inference_drives_the_sim_through_so101_ros(recording, tiny_act, ros_probe, tmp_path):
     from sensor_msgs.msg import JointState
 
@@ -277,6 +284,9 @@ def test_async_inference_drives_the_sim_through_so101_ros(recording, tiny_act, r
             stdout=logs["server"],
             stderr=subprocess.STDOUT,
         )
+        # The client gives up at once if nobody listens yet (LeRobot's order: the server first).
+        wait_until(lambda: listening(18765) or server.poll() is not None, 120.0, "policy_server on port 18765", sim)
+        assert server.poll() is None, "policy_server died:\n" + log("server")
         client = subprocess.Popen(
             [
                 python,
