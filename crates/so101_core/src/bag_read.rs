@@ -3,7 +3,7 @@
 //! recording cut short, a file from elsewhere), so memory stays bounded by what the file holds
 //! and by `record_length_limit`, whatever lengths its records claim.
 
-use std::{collections::HashMap, io::Read};
+use std::{borrow::Cow, collections::HashMap, io::Read};
 
 use byteorder::{BigEndian, LittleEndian};
 use mcap::{
@@ -107,7 +107,7 @@ impl<F> Records<F> {
                     Ok(records) => records,
                     Err(why) => return Ok(Some(why)),
                 };
-                let mut rest = records.as_slice();
+                let mut rest = &records[..];
                 while !rest.is_empty() {
                     let Some((opcode, data, after)) = next_record(rest) else {
                         return Ok(Some("a record runs past the end of its chunk".to_owned()));
@@ -139,7 +139,8 @@ fn next_record(records: &[u8]) -> Option<(u8, &[u8], &[u8])> {
 /// A chunk record's records, decompressed and checked against the chunk's CRC (MCAP: start and end
 /// time u64, uncompressed size u64, uncompressed CRC u32 (0: none), compression as a u32-prefixed
 /// string, records length u64, records). Memory stays within what the chunk claims and the limit.
-fn chunk_records(chunk: &[u8], limit: usize) -> Result<Vec<u8>, String> {
+/// An uncompressed chunk's records are borrowed from it, not copied.
+fn chunk_records(chunk: &[u8], limit: usize) -> Result<Cow<'_, [u8]>, String> {
     let malformed = || "a chunk record is malformed".to_owned();
     let uncompressed_size = u64::from_le_bytes(field(chunk, 16).ok_or_else(malformed)?);
     let crc = u32::from_le_bytes(field(chunk, 24).ok_or_else(malformed)?);
@@ -161,9 +162,12 @@ fn chunk_records(chunk: &[u8], limit: usize) -> Result<Vec<u8>, String> {
             format!("a chunk claims {uncompressed_size} bytes, over the limit of {limit}")
         })?;
     let records = match compression {
-        b"" => compressed.to_vec(),
-        b"zstd" => decompress(zstd::stream::read::Decoder::with_buffer(compressed), size)?,
-        b"lz4" => decompress(lz4::Decoder::new(compressed), size)?,
+        b"" => Cow::Borrowed(compressed),
+        b"zstd" => Cow::Owned(decompress(
+            zstd::stream::read::Decoder::with_buffer(compressed),
+            size,
+        )?),
+        b"lz4" => Cow::Owned(decompress(lz4::Decoder::new(compressed), size)?),
         other => {
             let other = String::from_utf8_lossy(other);
             return Err(format!(
@@ -201,8 +205,8 @@ fn decompress(decoder: Result<impl Read, std::io::Error>, size: usize) -> Result
 /// A channel record's id and topic (MCAP: id u16, schema id u16, topic as a u32 length and UTF-8
 /// bytes, then fields this reader does not need); None where a length runs past the record.
 fn channel(record: &[u8]) -> Option<(u16, String)> {
-    let id = u16::from_le_bytes(record.get(..2)?.try_into().ok()?);
-    let length = u32::from_le_bytes(record.get(4..8)?.try_into().ok()?);
+    let id = u16::from_le_bytes(field(record, 0)?);
+    let length = u32::from_le_bytes(field(record, 4)?);
     let topic = record.get(8..8usize.checked_add(usize::try_from(length).ok()?)?)?;
     Some((id, String::from_utf8(topic.to_vec()).ok()?))
 }
