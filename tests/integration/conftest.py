@@ -8,9 +8,10 @@ only loopback (DDS discovery multicasts on every interface):
         scripts/isolated .venv/bin/python -m pytest tests/integration
 
 (scripts/test.sh does exactly this.) The conftest refuses to run (pytest.exit) anywhere
-else. Every pytest run gets its own namespace, so no ROS_DOMAIN_ID juggling is needed; the tests run
-one after the other and each starts its own node(s). A missing node binary FAILS the tests (it never
-skips them).
+else. Every pytest run gets its own namespace. scripts/test.sh runs the tests in two pytest-xdist
+workers (`-n 2`) that share that namespace, so each worker takes a DDS domain of its own (below): the
+two workers' graphs never meet. Each test starts its own node(s). A missing node binary FAILS the
+tests (it never skips them).
 """
 
 from __future__ import annotations
@@ -45,6 +46,15 @@ signal.signal(signal.SIGINT, signal.default_int_handler)
 # rclpy creates any context.
 os.environ.setdefault("RMW_IMPLEMENTATION", "rmw_fastrtps_cpp")
 os.environ.setdefault("FASTRTPS_DEFAULT_PROFILES_FILE", str(REPO_ROOT / "python" / "fastdds_profile.xml"))
+
+# One DDS domain per pytest-xdist worker ("gw0", "gw1", ...), inherited by every node and rclpy
+# process the worker starts: the workers share one network namespace and /dev/shm, and a domain
+# of its own gives each worker its own discovery and data ports (UDP and Fast DDS shared memory).
+# Domains from 20 up: test_plumbing uses 7 and listens on 0.
+XDIST_DOMAIN_BASE = 20
+_worker = os.environ.get("PYTEST_XDIST_WORKER", "")
+if _worker.startswith("gw"):
+    os.environ["ROS_DOMAIN_ID"] = str(XDIST_DOMAIN_BASE + int(_worker[2:]))
 
 
 def pytest_configure(config: pytest.Config) -> None:
