@@ -2,7 +2,10 @@
 //! calibration file (`CalibrationArgs`), with their value parsers. `cli` flattens them into the
 //! node's options; each tool flattens them into its own (`tools::*::*Args`).
 
-use std::{path::PathBuf, time::Duration};
+use std::{
+    path::{Path, PathBuf},
+    time::Duration,
+};
 
 use crate::{
     bus::BusConfig,
@@ -22,20 +25,47 @@ pub struct PortArgs {
     /// Extra attempts after a transaction got no valid answer (0 to 10).
     #[arg(long, default_value_t = 2, value_parser = clap::value_parser!(u32).range(0..=10))]
     pub retries: u32,
-    /// Milliseconds allowed for the adapter and the OS on top of the wire time of a transaction.
-    #[arg(long, default_value_t = 10.0, value_parser = parse_positive_ms)]
-    pub bus_slack_ms: f64,
+    /// Milliseconds allowed for the adapter and the OS on top of the wire time of a transaction
+    /// (default 10 on a serial adapter, 100 on a pseudo-terminal such as the emulator's, whose
+    /// answers wait for the OS to run a process: tens of ms on a busy machine).
+    #[arg(long, value_parser = parse_positive_ms)]
+    pub bus_slack_ms: Option<f64>,
 }
+
+/// The slack for a USB serial adapter: its latency timer and the OS.
+pub const ADAPTER_SLACK_MS: f64 = 10.0;
+/// The slack for a pseudo-terminal: the peer is a process, and a loaded machine leaves it waiting
+/// for a core for tens of ms (the emulator missed 3 x 10.6 ms beside a training run).
+pub const PSEUDO_TERMINAL_SLACK_MS: f64 = 100.0;
 
 impl PortArgs {
     pub fn bus_config(&self) -> BusConfig {
         BusConfig {
             baud: self.baud,
             retries: self.retries,
-            slack: Duration::from_secs_f64(self.bus_slack_ms / 1000.0),
+            slack: Duration::from_secs_f64(self.bus_slack_ms() / 1000.0),
             ..BusConfig::default()
         }
     }
+
+    /// The slack in ms: the one given, else the default for what the port is.
+    pub fn bus_slack_ms(&self) -> f64 {
+        self.bus_slack_ms
+            .unwrap_or_else(|| default_slack_ms(is_pseudo_terminal(&self.port)))
+    }
+}
+
+pub fn default_slack_ms(pseudo_terminal: bool) -> f64 {
+    if pseudo_terminal {
+        PSEUDO_TERMINAL_SLACK_MS
+    } else {
+        ADAPTER_SLACK_MS
+    }
+}
+
+/// Whether `port` is (a link to) the follower side of a pseudo-terminal, /dev/pts/N.
+pub fn is_pseudo_terminal(port: &Path) -> bool {
+    std::fs::canonicalize(port).is_ok_and(|path| path.starts_with("/dev/pts"))
 }
 
 /// Which calibration file.

@@ -14,6 +14,7 @@ mod common;
 
 use common::calibration;
 use so101_feetech_driver::{
+    args::{is_pseudo_terminal, PortArgs, ADAPTER_SLACK_MS, PSEUDO_TERMINAL_SLACK_MS},
     arm::{open_bus, Arm, ArmSettings, CalibrationWrite},
     bus::{BusConfig, BusError},
     calibration::{ArmCalibration, ArmRole},
@@ -76,6 +77,42 @@ fn slot(bench: &Bench, index: usize) -> SlotSnapshot {
 
 fn control(bench: &Bench, line: &str) {
     bench.emulator.control_line(line).unwrap();
+}
+
+#[test]
+fn a_pseudo_terminal_gets_the_slack_of_a_process_and_an_adapter_the_default() {
+    let bench = emulator(EmulatorConfig::default());
+    let ports = |port: PathBuf, slack: Option<f64>| PortArgs {
+        port,
+        baud: 1_000_000,
+        retries: 2,
+        bus_slack_ms: slack,
+    };
+    // The emulator's link, followed to /dev/pts/N.
+    assert!(is_pseudo_terminal(&bench.link));
+    let emulated = ports(bench.link.clone(), None);
+    assert_eq!(emulated.bus_slack_ms(), PSEUDO_TERMINAL_SLACK_MS);
+    assert_eq!(emulated.bus_config().slack, Duration::from_millis(100));
+    // A port that is not a pseudo-terminal (a USB adapter's /dev/ttyACM0 is a character device of
+    // its own; a missing path fails at open, with the default in place).
+    assert!(!is_pseudo_terminal(std::path::Path::new("/dev/null")));
+    assert_eq!(
+        ports("/dev/ttyACM9".into(), None).bus_slack_ms(),
+        ADAPTER_SLACK_MS
+    );
+    // What the user gives wins.
+    assert_eq!(ports(bench.link.clone(), Some(4.0)).bus_slack_ms(), 4.0);
+
+    // The emulator answering 40 ms late, as when a busy machine keeps its process from a core:
+    // the pseudo-terminal's default waits for it, where an adapter's 10 ms gave up (set-up-motors
+    // failed so beside a training run).
+    control(&bench, "delay 40");
+    let mut patient = open_bus(&bench.link, emulated.bus_config()).unwrap();
+    assert!(patient.ping(1).is_ok());
+    drop(patient); // the port is opened exclusively
+    let adapter_like = ports(bench.link.clone(), Some(ADAPTER_SLACK_MS));
+    let mut hasty = open_bus(&bench.link, adapter_like.bus_config()).unwrap();
+    assert!(matches!(hasty.ping(1), Err(BusError::NoAnswer { .. })));
 }
 
 #[test]

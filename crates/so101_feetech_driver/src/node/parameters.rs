@@ -22,7 +22,7 @@ pub fn declarations(args: &RunArgs, limits: &[JointLimit; JOINT_COUNT]) -> Param
         options.declare("port", text(&args.port.port.display())),
         options.declare("baud", Value::Integer(i64::from(args.port.baud))),
         options.declare("retries", Value::Integer(i64::from(args.port.retries))),
-        options.declare("bus_slack_ms", Value::Double(args.port.bus_slack_ms)),
+        options.declare("bus_slack_ms", Value::Double(args.port.bus_slack_ms())),
         options.declare("robot_id", Value::String(args.calibration.robot_id.clone())),
         options
             .declare("calibration", text(&args.calibration.path().display()))
