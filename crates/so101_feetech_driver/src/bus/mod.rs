@@ -16,6 +16,7 @@ mod owed;
 mod transport;
 
 use std::{
+    collections::BTreeSet,
     io,
     time::{Duration, Instant},
 };
@@ -142,6 +143,9 @@ pub struct ServoBus<T: Transport = SerialTransport> {
     may_have_stale_bytes: bool,
     /// Answers that servos still owe to requests that timed out.
     owed: OwedReplies,
+    /// Servos whose owed answers arrived after all: they are there, only slow (a busy machine's
+    /// emulator) or their answer was delayed.
+    late_answerers: BTreeSet<u8>,
 }
 
 impl<T: Transport> ServoBus<T> {
@@ -155,7 +159,31 @@ impl<T: Transport> ServoBus<T> {
             servo_errors: [ServoErrors::default(); 256],
             may_have_stale_bytes: true,
             owed: OwedReplies::default(),
+            late_answerers: BTreeSet::new(),
         }
+    }
+
+    /// Replaces the timing and retry settings (a scan probes briefly, then identifies patiently).
+    pub fn set_config(&mut self, config: BusConfig) {
+        self.config = config;
+    }
+
+    /// The servos whose answers came after their request had timed out, since the last call;
+    /// first waits up to `wait` for answers still owed.
+    pub fn take_late_answerers(&mut self, wait: Duration) -> Result<BTreeSet<u8>, BusError> {
+        let deadline = Instant::now() + wait;
+        while !self.owed.is_empty() {
+            let count = self
+                .transport
+                .read_until(&mut self.buffer[..], deadline)
+                .map_err(BusError::Disconnected)?;
+            self.reader.push(&self.buffer[..count]);
+            self.settle_buffered_replies();
+            if count == 0 && Instant::now() >= deadline {
+                break;
+            }
+        }
+        Ok(std::mem::take(&mut self.late_answerers))
     }
 
     pub fn config(&self) -> &BusConfig {
@@ -407,6 +435,7 @@ impl<T: Transport> ServoBus<T> {
                 let len = status.parameters.len();
                 if len != reply_len && self.owed.settle(status.id, len) {
                     self.stats.stale_replies += 1;
+                    self.late_answerers.insert(status.id);
                     continue;
                 }
                 let slot = expect.iter().position(|id| *id == status.id);
@@ -418,6 +447,11 @@ impl<T: Transport> ServoBus<T> {
                             errors: status.errors,
                             data: status.parameters,
                         });
+                    }
+                    // The late answer of another servo, as long as the one asked for.
+                    _ if self.owed.settle(status.id, len) => {
+                        self.stats.stale_replies += 1;
+                        self.late_answerers.insert(status.id);
                     }
                     _ => self.reader.garbage_bytes += packet.len() as u64,
                 }
@@ -491,6 +525,7 @@ impl<T: Transport> ServoBus<T> {
             if let Ok(status) = crate::protocol::decode_status(&packet) {
                 if self.owed.settle(status.id, status.parameters.len()) {
                     self.stats.stale_replies += 1;
+                    self.late_answerers.insert(status.id);
                 }
             }
         }

@@ -99,6 +99,10 @@ impl OwedReplies {
     }
 
     /// Gives up on every answer `ids` owe (waited out: taken as lost).
+    pub fn is_empty(&self) -> bool {
+        self.entries.is_empty()
+    }
+
     pub fn forget(&mut self, ids: &[u8]) {
         self.entries.retain(|owed| !ids.contains(&owed.id));
     }

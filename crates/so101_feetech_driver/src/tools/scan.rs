@@ -33,8 +33,14 @@ pub struct Found {
     pub servos: Vec<ServoInfo>,
 }
 
-/// Pings ids 1..=max_id; a missing id costs one short timeout, not the default retries.
-pub fn find_servos(bus: &mut ServoBus, max_id: u8) -> Result<Vec<ServoInfo>, BusError> {
+/// Pings ids 1..=max_id on `bus` (set up by `probe_config`): a missing id costs one short
+/// timeout, not the default retries. A servo whose answer came after that short wait (an emulator
+/// on a busy machine) is there all the same: it is identified again with `patient` settings.
+pub fn find_servos(
+    bus: &mut ServoBus,
+    max_id: u8,
+    patient: BusConfig,
+) -> Result<Vec<ServoInfo>, BusError> {
     let mut found = Vec::new();
     for id in 1..=max_id.min(crate::protocol::MAX_ID) {
         match bus.ping(id) {
@@ -42,6 +48,24 @@ pub fn find_servos(bus: &mut ServoBus, max_id: u8) -> Result<Vec<ServoInfo>, Bus
             Err(BusError::NoAnswer { .. }) => {}
             Err(error) => return Err(error),
         }
+    }
+    let late = bus.take_late_answerers(patient.slack)?;
+    let missed: Vec<u8> = late
+        .into_iter()
+        .filter(|id| found.iter().all(|servo| servo.id != *id))
+        .collect();
+    if !missed.is_empty() {
+        tracing::info!(
+            ?missed,
+            "servos answered late; asking them again, patiently"
+        );
+        let probe = *bus.config();
+        bus.set_config(patient);
+        for id in missed {
+            found.push(identify_answering(bus, id)?);
+        }
+        bus.set_config(probe);
+        found.sort_by_key(|servo| servo.id);
     }
     Ok(found)
 }
@@ -82,7 +106,7 @@ pub fn run(args: &ScanArgs) -> Result<()> {
             ..args.port.bus_config()
         });
         let mut bus = open_bus(&args.port.port, config)?;
-        let servos = find_servos(&mut bus, args.max_id)?;
+        let servos = find_servos(&mut bus, args.max_id, args.port.bus_config())?;
         let stats = bus.stats();
         if stats.checksum_errors > 0 {
             tracing::warn!(

@@ -65,7 +65,7 @@ pub fn assign(
     let mut found = None;
     for baud in bauds {
         let mut bus = probe(baud)?;
-        match find_servos(&mut bus, MAX_ID)?.as_slice() {
+        match find_servos(&mut bus, MAX_ID, BusConfig { baud, ..config })?.as_slice() {
             [] => continue,
             [only] => {
                 found = Some((baud, *only));
