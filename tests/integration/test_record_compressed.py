@@ -7,6 +7,7 @@ dataset whose video frames are those frames."""
 from __future__ import annotations
 
 import io
+import re
 import subprocess
 import sys
 from pathlib import Path
@@ -96,7 +97,11 @@ def test_the_default_recording_keeps_jpeg_frames_that_rosbags_reads_and_the_conv
         timeout=120,
     )
     assert done.returncode == 0, done.stdout + done.stderr
-    assert "1 episode(s) (1 successful)" in done.stdout and "0 skipped" in done.stdout and "clean" in done.stdout, done.stdout
+    # Whether the expert succeeded in real time is not this test's concern (on a busy machine its
+    # grasp can come late and slip; test_teleop checks the expert): the episode is
+    # converted either way, with nothing skipped, and the dataset reads back clean.
+    assert re.search(r"1 episode\(s\) \([01] successful\)", done.stdout), done.stdout
+    assert "0 skipped" in done.stdout and "clean" in done.stdout, done.stdout
 
     from lerobot.datasets.lerobot_dataset import LeRobotDataset
 
