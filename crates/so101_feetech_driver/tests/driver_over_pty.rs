@@ -15,7 +15,7 @@ mod common;
 use common::calibration;
 use so101_feetech_driver::{
     args::{is_pseudo_terminal, PortArgs, ADAPTER_SLACK_MS, PSEUDO_TERMINAL_SLACK_MS},
-    arm::{open_bus, Arm, ArmSettings, CalibrationWrite},
+    arm::{open_bus, Arm, ArmSettings, CalibrationWrite, ServoInfo},
     bus::{BusConfig, BusError},
     calibration::{ArmCalibration, ArmRole},
     protocol::registers,
@@ -483,12 +483,8 @@ fn setup_motors_gives_each_factory_servo_its_id_one_at_a_time() {
     ));
 }
 
-#[test]
-fn scan_finds_every_servo_with_model_and_firmware() {
-    let bench = emulator(EmulatorConfig::default());
-    let mut bus = open_bus(&bench.link, probe_config(settings(0).bus)).unwrap();
-    let started = Instant::now();
-    let found = find_servos(&mut bus, 252, settings(2).bus).unwrap();
+/// The emulator's six servos, ids 1 to 6, each an STS3215 (model 777) with firmware 3.10.
+fn assert_six_sts3215(found: &[ServoInfo]) {
     assert_eq!(
         found.iter().map(|s| s.id).collect::<Vec<_>>(),
         [1, 2, 3, 4, 5, 6]
@@ -496,6 +492,15 @@ fn scan_finds_every_servo_with_model_and_firmware() {
     assert!(found
         .iter()
         .all(|s| s.model == 777 && s.firmware == (3, 10)));
+}
+
+#[test]
+fn scan_finds_every_servo_with_model_and_firmware() {
+    let bench = emulator(EmulatorConfig::default());
+    let mut bus = open_bus(&bench.link, probe_config(settings(0).bus)).unwrap();
+    let started = Instant::now();
+    let found = find_servos(&mut bus, 252, settings(2).bus).unwrap();
+    assert_six_sts3215(&found);
     assert!(started.elapsed() < Duration::from_secs(5), "scan too slow");
 }
 
@@ -511,11 +516,5 @@ fn scan_finds_servos_that_answer_after_the_probes_wait() {
     };
     let mut bus = open_bus(&bench.link, probe_config(patient)).unwrap();
     let found = find_servos(&mut bus, 12, patient).unwrap();
-    assert_eq!(
-        found.iter().map(|s| s.id).collect::<Vec<_>>(),
-        [1, 2, 3, 4, 5, 6]
-    );
-    assert!(found
-        .iter()
-        .all(|s| s.model == 777 && s.firmware == (3, 10)));
+    assert_six_sts3215(&found);
 }

@@ -171,18 +171,7 @@ impl<T: Transport> ServoBus<T> {
     /// The servos whose answers came after their request had timed out, since the last call;
     /// first waits up to `wait` for answers still owed.
     pub fn take_late_answerers(&mut self, wait: Duration) -> Result<BTreeSet<u8>, BusError> {
-        let deadline = Instant::now() + wait;
-        while !self.owed.is_empty() {
-            let count = self
-                .transport
-                .read_until(&mut self.buffer[..], deadline)
-                .map_err(BusError::Disconnected)?;
-            self.reader.push(&self.buffer[..count]);
-            self.settle_buffered_replies();
-            if count == 0 && Instant::now() >= deadline {
-                break;
-            }
-        }
+        self.settle_owed_until(Instant::now() + wait, OwedReplies::is_empty)?;
         Ok(std::mem::take(&mut self.late_answerers))
     }
 
@@ -501,9 +490,19 @@ impl<T: Transport> ServoBus<T> {
         if let Some(asked) = self.owed.distinct_length(address, length, ids) {
             return Ok(asked);
         }
-        let deadline = Instant::now() + self.config.slack;
         self.reader.clear();
-        loop {
+        self.settle_owed_until(Instant::now() + self.config.slack, |_| false)?;
+        self.owed.forget(ids);
+        Ok(length)
+    }
+
+    /// Reads and settles owed replies until `deadline`, or sooner once `settled` holds.
+    fn settle_owed_until(
+        &mut self,
+        deadline: Instant,
+        settled: impl Fn(&OwedReplies) -> bool,
+    ) -> Result<(), BusError> {
+        while !settled(&self.owed) {
             let count = self
                 .transport
                 .read_until(&mut self.buffer[..], deadline)
@@ -514,8 +513,7 @@ impl<T: Transport> ServoBus<T> {
                 break;
             }
         }
-        self.owed.forget(ids);
-        Ok(length)
+        Ok(())
     }
 
     /// Counts the owed replies among the buffered packets (the rest is left for the caller).
