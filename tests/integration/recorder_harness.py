@@ -354,7 +354,7 @@ class RecorderServices:
     """One rclpy client per recorder service, created once (a fresh client per call would wait for
     discovery every time)."""
 
-    TRIGGERS = ("start", "stop", "discard")
+    TRIGGERS = ("start", "stop", "discard", "ready")
 
     def __init__(self, ros, recorder: SimNode | None, namespace: str = "", timeout: float = 15.0):
         from std_srvs.srv import SetBool, Trigger

@@ -37,6 +37,20 @@ def gone(pid: int) -> bool:
         return True  # reaped meanwhile
 
 
+def stream_spans(episode: Path) -> dict[str, tuple[int, int]]:
+    """The log times of the first and last message of each streamed topic (joint states, cube pose)
+    in an episode's bag, as rosbags reads them."""
+    from rosbags.rosbag2 import Reader
+
+    spans: dict[str, tuple[int, int]] = {}
+    with Reader(episode) as reader:
+        streams = [c for c in reader.connections if c.topic in ("/joint_states", "/cube/pose")]
+        for connection, timestamp, _ in reader.messages(connections=streams):
+            first, _ = spans.get(connection.topic, (timestamp, timestamp))
+            spans[connection.topic] = (first, timestamp)
+    return spans
+
+
 def test_sim_expert_recording_profile_records_its_episodes_and_ends(tmp_path):
     bags, logs, rrd = tmp_path / "bags", tmp_path / "logs", tmp_path / "run.rrd"
     done = subprocess.run(
@@ -173,5 +187,14 @@ def test_a_timed_session_on_the_sim_resets_the_scene_before_each_episode(tmp_pat
         assert abs(info["duration"]["nanoseconds"] * 1e-9 - 2.0) < 0.5, info["duration"]
         topics = {t["topic_metadata"]["name"] for t in info["topics_with_message_count"]}
         assert "/cube/pose" in topics and "/joint_states" in topics, topics
+        # Every stream is in the episode from its start to its stop, the first one included (the
+        # session begins once the recorder receives every stream it records).
+        custom = info["custom_data"]
+        began, ended = int(custom["start_time_ns"]), int(custom["stop_time_ns"])
+        for topic, (first, last) in stream_spans(episode).items():
+            assert first - began < 0.2e9 and ended - last < 0.2e9, (
+                f"{episode.name}: {topic} from {(first - began) * 1e-9:.2f} s to {(last - began) * 1e-9:.2f} s "
+                f"of {(ended - began) * 1e-9:.2f} s"
+            )
     resets = (logs / "so101_sim_node.log").read_text().count("new episode")
     assert resets == 2, f"{resets} resets of the sim for 2 episodes"

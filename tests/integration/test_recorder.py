@@ -427,6 +427,51 @@ def test_services_drive_episodes_and_refuse_when_nothing_is_recorded(recorder_fa
     services.close()
 
 
+def test_once_ready_answers_yes_an_episode_holds_a_new_stream_from_its_first_period(recorder_factory, ros):
+    """/recorder/ready, as a timed session asks it before its first episode: yes with nothing
+    published; while a new publisher's samples would not reach the recorder, no, naming its topic;
+    then yes, and an episode started at once holds the stream from its first period on, none lost."""
+    from std_msgs.msg import String
+
+    recorder = recorder_factory("--topics", "/ready_probe")
+    services = RecorderServices(ros, recorder)
+    answer = services.call("ready")
+    assert answer.success, f"nothing is published, yet: {answer.message}"
+
+    published = []
+    publisher = ros.node.create_publisher(String, "/ready_probe", reliable_qos(100))
+
+    def publish() -> None:
+        publisher.publish(String(data=str(len(published))))
+        published.append(time.time_ns())
+
+    timer = ros.node.create_timer(0.01, publish)
+    waiting = []
+    deadline = time.monotonic() + 10.0
+    while not (answer := services.call("ready")).success:
+        waiting.append(answer.message)
+        assert time.monotonic() < deadline, f"still not ready after 10 s: {answer.message}"
+    assert set(waiting) <= {"not receiving yet: /ready_probe"}, waiting
+
+    assert services.call("start").success
+    episode = wait_episode(recorder.output, 0, recorder)
+    time.sleep(0.5)
+    assert services.call("stop").success
+    ros.node.destroy_timer(timer)
+    info = wait_metadata(episode, recorder)
+    began = int(info["custom_data"]["start_time_ns"])
+    stream = read_bag(mcap_files(episode)[0]).on("/ready_probe")
+    # The publisher's 100 Hz, and a loaded machine's delay of its timer, are not measured here: only
+    # that the first sample published after the start is in, and none after it is missing.
+    after_start = [k for k, stamp in enumerate(published) if stamp > began + 5_000_000]
+    counters = [int(m.ros.data) for m in stream]
+    assert counters and counters[0] <= after_start[0], (
+        f"the episode's first sample is #{counters[:1]}; #{after_start[0]} was published after its start"
+    )
+    assert counters == list(range(counters[0], counters[0] + len(counters))), f"samples lost: {counters}"
+    services.close()
+
+
 # =========================================================================== 5. kill -9
 def test_after_kill_9_every_closed_chunk_is_readable(sim_factory, recorder_factory, ros):
     start_sim_and_wait(sim_factory, ros)

@@ -77,6 +77,9 @@ pub mod services {
     pub const RECORDER_DISCARD_LAST: &str = "recorder/discard_last";
     /// std_srvs/SetBool: marks the current (or last) episode a success or not.
     pub const RECORDER_MARK_SUCCESS: &str = "recorder/mark_success";
+    /// std_srvs/Trigger: whether the recorder receives every publisher of the topics it records
+    /// (false: the message names the topics still being matched).
+    pub const RECORDER_READY: &str = "recorder/ready";
 }
 
 /// Actions, relative to the namespace.
@@ -153,6 +156,7 @@ pub fn python_module() -> String {
         ("RECORDER_DISCARD", services::RECORDER_DISCARD),
         ("RECORDER_DISCARD_LAST", services::RECORDER_DISCARD_LAST),
         ("RECORDER_MARK_SUCCESS", services::RECORDER_MARK_SUCCESS),
+        ("RECORDER_READY", services::RECORDER_READY),
     ];
     for (name, value) in constants {
         out += &format!("{name} = \"{value}\"\n");

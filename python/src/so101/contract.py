@@ -95,6 +95,7 @@ RECORDER_STOP = "recorder/stop"
 RECORDER_DISCARD = "recorder/discard"
 RECORDER_DISCARD_LAST = "recorder/discard_last"
 RECORDER_MARK_SUCCESS = "recorder/mark_success"
+RECORDER_READY = "recorder/ready"
 
 # The episode-bag layout (so101_core::episode_bag): directories <prefix>_<index:06>,
 # rosbag2's metadata file, the keys of its custom_data.

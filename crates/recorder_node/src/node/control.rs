@@ -1,5 +1,6 @@
 //! Episode control: /episode/events, /task/success (the default for an unmarked episode),
-//! /sim/episode (the simulation's settings) and the recorder's services. Nothing here waits for
+//! /sim/episode (the simulation's settings) and the recorder's services (/recorder/ready is
+//! answered by the loop, from the inputs). Nothing here waits for
 //! the writer: events are sent and forgotten, service calls are answered once the writer's reply
 //! arrives, on a later turn of the loop.
 
@@ -37,6 +38,7 @@ pub struct Control {
     discard: Server<TriggerRequest, TriggerResponse>,
     discard_last: Server<TriggerRequest, TriggerResponse>,
     mark_success: Server<SetBoolRequest, TriggerResponse>,
+    ready: Server<TriggerRequest, TriggerResponse>,
     episodes: EpisodeCommands,
     pending: Vec<PendingCall>,
     warnings: RateLimiter,
@@ -60,6 +62,7 @@ impl Control {
             discard: node.server::<Trigger>(services::RECORDER_DISCARD)?,
             discard_last: node.server::<Trigger>(services::RECORDER_DISCARD_LAST)?,
             mark_success: node.server::<SetBool>(services::RECORDER_MARK_SUCCESS)?,
+            ready: node.server::<Trigger>(services::RECORDER_READY)?,
             episodes: EpisodeCommands::default(),
             pending: Vec::new(),
             warnings: RateLimiter::new(Duration::from_secs(1)),
@@ -104,6 +107,24 @@ impl Control {
             }
         }
         self.answer_ready();
+    }
+
+    /// The /recorder/ready calls that arrived since the last look.
+    pub fn ready_requests(&self) -> Vec<RmwRequestId> {
+        std::iter::from_fn(|| match self.ready.receive_request() {
+            Ok(Some((id, _))) => Some(id),
+            _ => None,
+        })
+        .collect()
+    }
+
+    /// Answers /recorder/ready calls.
+    pub fn answer_ready_requests(&self, requests: Vec<RmwRequestId>, answer: &TriggerResponse) {
+        for id in requests {
+            if let Err(error) = self.ready.send_response(id, answer.clone()) {
+                tracing::warn!(?error, "cannot answer a recorder service call");
+            }
+        }
     }
 
     /// The command that closes the recording at shutdown.

@@ -1,6 +1,6 @@
 //! The raw subscriptions: the topics the selection wants (found by discovery, or the fixed
 //! defaults), read on the loop's thread as DDS wakes it, each sample handed to the writer as
-//! wire bytes without waiting for it.
+//! wire bytes without waiting for it; and which discovered publishers each reader has matched.
 
 use std::{
     collections::HashSet,
@@ -13,12 +13,14 @@ use ros2_client::QosProfile;
 use rustdds::{
     mio::{Events, Poll, PollOpt, Ready, Token},
     no_key::SimpleDataReader,
+    DataReaderStatus, RTPSEntity, StatusEvented, GUID,
 };
 use so101_core::ros::{qos, rate_limit::RateLimiter, RosNode};
 use so101_msgs::TypeInfo;
 
 use super::{
     intake::{ns_from_ticks, reader_depth, LogClock, Losses, DEPTH},
+    readiness::{self, Reception},
     writer::{Command, QueueBudget},
 };
 use crate::{
@@ -44,6 +46,38 @@ struct Input {
     /// Whether the selection still wants it (its samples are taken either way, written only then).
     recording: bool,
     log_clock: LogClock,
+    /// The publishers this reader has matched, refused (incompatible QoS) or had a sample from.
+    /// A sample counts too: RustDDS drops match events its small status queue has no room for.
+    settled: HashSet<GUID>,
+}
+
+impl Input {
+    /// Takes the reader's match events.
+    fn take_statuses(&mut self) {
+        while let Some(status) = self.reader.try_recv_status() {
+            match status {
+                DataReaderStatus::SubscriptionMatched {
+                    current, writer, ..
+                } => {
+                    if current.count_change() > 0 {
+                        self.settled.insert(writer);
+                    } else {
+                        self.settled.remove(&writer);
+                    }
+                }
+                DataReaderStatus::RequestedIncompatibleQos { writer, .. }
+                    if self.settled.insert(writer) =>
+                {
+                    tracing::warn!(
+                        topic = %self.name,
+                        ?writer,
+                        "a publisher's QoS is not one the recorder (reliable) can take: its samples are not recorded"
+                    );
+                }
+                _ => {}
+            }
+        }
+    }
 }
 
 /// The raw subscriptions and their wake-up.
@@ -172,6 +206,7 @@ impl Inputs {
             reader,
             recording: true,
             log_clock: LogClock::default(),
+            settled: HashSet::new(),
         });
         tracing::info!(topic = name, r#type = %info.full_name(), "recording topic");
         Ok(())
@@ -190,6 +225,42 @@ impl Inputs {
         self.selection = selection;
     }
 
+    /// The topics the selection wants that have a publisher whose samples would not reach the
+    /// recorder yet (see `readiness`). Its own publishers (rosout, parameter events) do not count.
+    pub fn waiting(&mut self, node: &RosNode) -> Vec<String> {
+        for input in &mut self.inputs {
+            input.take_statuses();
+        }
+        let participant = node.context().domain_participant();
+        let own = participant.guid().prefix;
+        let publishers: Vec<(String, GUID)> = participant
+            .discovered_writers()
+            .into_iter()
+            .map(|writer| writer.publication_topic_data)
+            .filter(|publication| publication.key.prefix != own)
+            .filter_map(|publication| {
+                let name = ros_topic_name(&publication.topic_name)?;
+                self.selection
+                    .wants(&name)
+                    .then_some((name, publication.key))
+            })
+            .collect();
+        let receptions = publishers.iter().filter_map(|(name, writer)| {
+            let reception = match self.inputs.iter().find(|input| &input.name == name) {
+                Some(input) if input.settled.contains(writer) => Reception::Settled,
+                Some(_) => Reception::Matching,
+                // Refused once (a type without a definition, a failed subscription): never recorded.
+                None if self.seen.contains(name) => return None,
+                None => Reception::NotSubscribed,
+            };
+            Some((name.as_str(), reception))
+        });
+        readiness::waiting_topics(receptions)
+            .into_iter()
+            .map(str::to_owned)
+            .collect()
+    }
+
     /// Waits for data (at most RECEIVE_WAIT) and hands every sample to the writer.
     pub fn receive(&mut self, commands: &SyncSender<Command>, budget: &QueueBudget) {
         if let Err(error) = self.poll.poll(&mut self.events, Some(RECEIVE_WAIT)) {
@@ -198,6 +269,7 @@ impl Inputs {
         }
         let mut lost = 0;
         for input in &mut self.inputs {
+            input.take_statuses();
             input.reader.drain_read_notifications();
             loop {
                 let change = match input.reader.try_take_one() {
@@ -210,6 +282,7 @@ impl Inputs {
                         break;
                     }
                 };
+                input.settled.insert(change.writer_guid);
                 lost += self.gaps.observe(
                     input.topic,
                     change.writer_guid.to_bytes(),

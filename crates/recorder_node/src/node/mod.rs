@@ -5,12 +5,15 @@
 //!   (timestamps, log times, reader depths, loss counts; pure).
 //! - `control`: episode events, verdicts and services (I/O), on `episode_commands`' rules (what
 //!   each becomes for the writer, in which order, answered how; pure).
+//! - `readiness`: whether the inputs receive every publisher of what they record (pure), for
+//!   /recorder/ready.
 //! - `writer`: the thread that carries the commands out on the bag.
 
 mod control;
 mod episode_commands;
 mod inputs;
 mod intake;
+mod readiness;
 mod writer;
 
 use std::{
@@ -103,6 +106,14 @@ pub fn run(args: Args) -> Result<()> {
             }
         }
         control.take(&sender);
+        let asked = control.ready_requests();
+        if !asked.is_empty() {
+            // Publishers found since the last discovery get their readers now, not a second later.
+            inputs.discover(&mut node, &sender);
+            let waiting = inputs.waiting(&node);
+            let waiting: Vec<&str> = waiting.iter().map(String::as_str).collect();
+            control.answer_ready_requests(asked, &readiness::answer(&waiting));
+        }
         inputs.receive(&sender, &budget);
     }
     let _ = sender.send(control.shutdown());

@@ -10,7 +10,10 @@ every episode carrying the task text. Keys in the launcher's terminal, as lerobo
 An episode with a time limit needs no key, so both hands can stay on the leader arm. The session
 drives the recorder through its services (/recorder/start, stop, discard, discard_last: each call
 is answered, so an episode's time counts from when its recording began; the task text is the
-recorder's --task) and, on the simulated arm, calls /sim/reset before each episode.
+recorder's --task) and, on the simulated arm, calls /sim/reset before each episode. The first
+episode begins once /recorder/ready says the recorder receives every publisher of what it records
+(at most READY_TIMEOUT later, with a warning naming the topics it still waits for), so that it
+holds every stream from its start.
 
 `Session` is the schedule (pure, clocked by its caller); `decode_keys` reads a terminal's bytes;
 `TerminalKeys` and `SessionRunner` are the I/O."""
@@ -200,14 +203,18 @@ class SessionRunner:
             "discard_last": contract.RECORDER_DISCARD_LAST,
         }
         self.recorder = {name: node.create_client(Trigger, f"{prefix}/{service}") for name, service in services.items()}
+        self.ready = node.create_client(Trigger, f"{prefix}/{contract.RECORDER_READY}")
         self.reset = node.create_client(Trigger, f"{prefix}/{contract.SIM_RESET}") if sim else None
         self.started = False
+        self.ready_deadline: float | None = None
 
     def poll(self) -> bool:
-        """One look: starts the session once the recorder serves, applies keys and time. Returns
-        whether the session is over."""
+        """One look: starts the session once the recorder serves and receives its streams, applies
+        keys and time. Returns whether the session is over."""
         if not self.started:
-            if not all(client.service_is_ready() for client in self.recorder.values()):
+            if not all(client.service_is_ready() for client in (*self.recorder.values(), self.ready)):
+                return False
+            if not self._recorder_receives_everything():
                 return False
             self.started = True
             self._carry_out(self.session.begin(self.clock()))
@@ -217,17 +224,39 @@ class SessionRunner:
         self._carry_out(self.session.tick(self.clock()))
         return self.session.done
 
-    def _call(self, client, what: str) -> bool:
-        """One Trigger call, waited for; whether it succeeded (what went wrong is printed)."""
+    def _recorder_receives_everything(self) -> bool:
+        """Whether the first episode may begin: /recorder/ready says yes, or READY_TIMEOUT has
+        passed since the first ask (then what it still waits for is printed)."""
+        now = self.clock()
+        if self.ready_deadline is None:
+            self.ready_deadline = now + READY_TIMEOUT
+        answer = self._ask(self.ready)
+        if answer is not None and answer.success:
+            return True
+        if now < self.ready_deadline:
+            return False
+        why = answer.message if answer is not None else "no answer"
+        print(f"so101-launch: the recorder after {READY_TIMEOUT:g} s: {why}; recording anyway", flush=True)
+        return True
+
+    def _ask(self, client):
+        """One Trigger call, waited for: its answer, or None (then that is printed)."""
         import rclpy
         from std_srvs.srv import Trigger
 
         future = client.call_async(Trigger.Request())
         rclpy.spin_until_future_complete(self.node, future, timeout_sec=CALL_TIMEOUT)
         if not future.done():
-            print(f"so101-launch: no answer from {client.srv_name} within {CALL_TIMEOUT:g} s ({what})", flush=True)
+            print(f"so101-launch: no answer from {client.srv_name} within {CALL_TIMEOUT:g} s", flush=True)
+            return None
+        return future.result()
+
+    def _call(self, client, what: str) -> bool:
+        """One Trigger call, waited for; whether it succeeded (what went wrong is printed)."""
+        answer = self._ask(client)
+        if answer is None:
+            print(f"so101-launch: ({what}) not done", flush=True)
             return False
-        answer = future.result()
         if not answer.success:
             print(f"so101-launch: {client.srv_name}: {answer.message}", flush=True)
         return answer.success
@@ -250,3 +279,7 @@ class SessionRunner:
 # How long a service call may take before it is given up (a request is answered once the recorder
 # has matched this client, which the first call may wait for).
 CALL_TIMEOUT = 10.0
+# How long the first episode waits for the recorder to receive every stream (it takes well under a
+# second, a few on a loaded machine; a publisher whose samples can never reach it must not hold
+# the session for good).
+READY_TIMEOUT = 10.0
