@@ -138,6 +138,29 @@ def test_torque_on_is_refused_for_a_joint_resting_outside_its_range(arm_factory,
     assert abs(slots[1]["goal_position"] - slots[1]["present_position"]) <= 34, slots[1]
 
 
+def test_a_torque_change_that_fails_on_the_bus_is_answered_once_a_retry_made_it(arm_factory, ros):
+    """A bus hiccup (a servo silent for a moment, a loaded machine) is not the answer: the call
+    waits for the driver's retries and says what they did."""
+    from std_srvs.srv import SetBool
+
+    node, emulator = arm_factory("--start-torque-off")
+    joint_states(ros).wait_count(1, 30.0, node)
+    client = ros.node.create_client(SetBool, "/torque_enable")
+    wait_until(client.service_is_ready, 10.0, "/torque_enable", node)
+    time.sleep(0.5)  # the reply's writer matches a moment after the request's reader
+    emulator.command("silent 3 on")
+    time.sleep(0.3)
+    future = client.call_async(SetBool.Request(data=True))
+    # The first attempt meets the silent servo; the next ones find it back.
+    time.sleep(0.3)
+    emulator.command("silent 3 off")
+    wait_until(future.done, 10.0, "the answer of /torque_enable", node)
+    answer = future.result()
+    assert answer.success and "after a retry" in answer.message, answer.message
+    assert torque(emulator) == [1] * 6
+    ros.node.destroy_client(client)
+
+
 def test_an_overloaded_servo_makes_the_whole_arm_limp_and_says_why(arm_factory, ros):
     node, emulator = arm_factory()
     diag = diagnostics(ros)

@@ -5,6 +5,7 @@
 use std::time::{Duration, Instant};
 
 use anyhow::{Context, Result};
+use ros2_client::RmwRequestId;
 use so101_core::ros::{
     arm_controller::ArmController, command_inbox::CommandInbox, parameters::ParameterServer,
     rate_limit::RateLimiter, shutdown::Shutdown, RosNode,
@@ -15,7 +16,7 @@ use so101_msgs::{
 };
 
 use super::{
-    controller::{Controller, ControllerConfig, CycleOutput},
+    controller::{Controller, ControllerConfig, CycleOutput, TORQUE_ANSWER_WAIT},
     cycle_stats::{CycleStats, CycleSummary, Schedule},
     diagnostics::{self, DriverReport},
     emergency, parameters,
@@ -123,6 +124,7 @@ pub fn run(args: RunArgs) -> Result<()> {
         arm,
         clock_origin: (Time::now().as_secs_f64(), Instant::now()),
         torque_service,
+        pending_torque: None,
         parameters,
         stats: CycleStats::new(Instant::now()),
         next_diagnostics: Instant::now() + DIAGNOSTICS_PERIOD,
@@ -134,6 +136,15 @@ pub fn run(args: RunArgs) -> Result<()> {
     driver.keep_last_words_line();
     let summary = driver.run(&shutdown);
     driver.finish(summary, started_cpu)
+}
+
+/// A torque_enable call waiting for the controller's retries.
+struct PendingTorque {
+    id: RmwRequestId,
+    on: bool,
+    deadline: Instant,
+    /// Why the first attempt failed: the answer if the retries do not succeed in time.
+    message: String,
 }
 
 /// The controller with its ROS endpoints.
@@ -150,6 +161,9 @@ struct Driver {
     /// not jump a trajectory's setpoint.
     clock_origin: (f64, Instant),
     torque_service: TorqueService,
+    /// A torque_enable call whose change failed on the bus, answered once a retry made it so (or
+    /// gave up), at the latest after TORQUE_ANSWER_WAIT: a bus hiccup is not the answer.
+    pending_torque: Option<PendingTorque>,
     parameters: ParameterServer,
     stats: CycleStats,
     next_diagnostics: Instant,
@@ -201,8 +215,9 @@ impl Driver {
         self.take_trajectories(clock);
         self.take_commands(now);
         self.follow_trajectory(clock, now);
-        self.serve_torque_requests();
+        self.serve_torque_requests(now);
         let output = self.controller.cycle(now);
+        self.answer_pending_torque(now);
         self.keep_last_words_line();
         if let Some(positions) = &output.positions {
             // Stamped when the cycle began, right before the positions were read: the instant
@@ -306,14 +321,54 @@ impl Driver {
         }
     }
 
-    fn serve_torque_requests(&mut self) {
+    fn serve_torque_requests(&mut self, now: Instant) {
         while let Some((request, on)) = self.torque_service.next() {
+            if let Some(pending) = self.pending_torque.take() {
+                let message = "superseded by a later torque_enable call".to_owned();
+                self.torque_service.answer(pending.id, false, message);
+            }
             if let Some(arm) = self.arm.as_mut() {
                 arm.preempt("torque was switched");
             }
             let (success, message) = self.controller.request_torque(on);
+            if !success && self.controller.torque_outcome(on).is_none() {
+                tracing::warn!(on, %message, "torque_enable: retrying before answering");
+                self.pending_torque = Some(PendingTorque {
+                    id: request,
+                    on,
+                    deadline: now + TORQUE_ANSWER_WAIT,
+                    message,
+                });
+                continue;
+            }
             tracing::info!(on, success, %message, "torque_enable");
             self.torque_service.answer(request, success, message);
+        }
+    }
+
+    /// Answers the waiting torque_enable call once the retries decided it, or its time is up.
+    fn answer_pending_torque(&mut self, now: Instant) {
+        let Some(pending) = &self.pending_torque else {
+            return;
+        };
+        let state = if pending.on { "on" } else { "off" };
+        let (success, message) = match self.controller.torque_outcome(pending.on) {
+            Some(true) => (
+                true,
+                format!("torque {state} (after a retry: {})", pending.message),
+            ),
+            Some(false) => (
+                false,
+                self.controller
+                    .torque_problem()
+                    .map_or_else(|| pending.message.clone(), str::to_owned),
+            ),
+            None if now >= pending.deadline => (false, pending.message.clone()),
+            None => return,
+        };
+        if let Some(pending) = self.pending_torque.take() {
+            tracing::info!(on = pending.on, success, %message, "torque_enable");
+            self.torque_service.answer(pending.id, success, message);
         }
     }
 

@@ -36,6 +36,9 @@ use crate::{
 
 /// How often a torque state that does not match the wish is retried.
 pub const TORQUE_RETRY: Duration = Duration::from_millis(500);
+/// How long a /torque_enable call whose change failed on the bus waits for the retries before it
+/// is answered (the third failed torque-on gives up sooner).
+pub const TORQUE_ANSWER_WAIT: Duration = Duration::from_secs(2);
 /// A position further than this outside its calibrated range (ticks, ~18 degrees) is not a joint
 /// pushed by hand but a wrong calibration or a bad reading: no goal is computed from it.
 const IMPLAUSIBLE_MARGIN_TICKS: i32 = 200;
@@ -328,6 +331,24 @@ impl<C: Connector> Controller<C> {
                 format!("torque change failed ({error}); retrying every {TORQUE_RETRY:?}"),
             ),
         }
+    }
+
+    /// Where a torque wish `on` stands: met (`Some(true)`: every servo confirmed), given up or
+    /// replaced (`Some(false)`: refused, failed too often, another wish), or still being retried
+    /// (`None`: a change that failed on the bus, or an arm that is reconnecting).
+    pub fn torque_outcome(&self, on: bool) -> Option<bool> {
+        if self.torque.wanted != on {
+            Some(false)
+        } else if self.torque.on == on && !self.torque.uncertain {
+            Some(true)
+        } else {
+            None
+        }
+    }
+
+    /// Why the torque is not as wished, if the controller knows.
+    pub fn torque_problem(&self) -> Option<&str> {
+        self.torque_problem.as_ref().map(TorqueProblem::text)
     }
 
     /// Torque off on every servo that can hear it (unless `keep_torque_on`), for the way out.
