@@ -26,8 +26,8 @@ use so101_msgs::{
 
 use crate::{
     calibration::Intrinsics,
-    clock::{system_time_of, ClockPair},
-    controls::{ControlKind, Setting},
+    clock::{latency, system_time_of, ClockPair},
+    controls::{self, ControlKind, Setting},
     decode::{jpeg_from_rgb, rgb_from_jpeg, rgb_from_yuyv},
     device::{monotonic_now, CameraDevice, CameraStream, CaptureError, Frame},
     jpeg::whole_jpeg,
@@ -53,12 +53,18 @@ pub fn open(
     let mode = modes::choose(&offered, request.size, request.fps)
         .with_context(|| format!("--camera {}", request.name))?;
     let mut stream = device.open(mode)?;
-    apply(stream.as_mut(), settings).with_context(|| format!("--camera {}", request.name))?;
+    apply(stream.as_mut(), settings, &request.name)
+        .with_context(|| format!("--camera {}", request.name))?;
     Ok((mode, stream))
 }
 
-/// Sets each control, refusing a setting the camera does not take (with its range).
-fn apply(stream: &mut dyn CameraStream, settings: &BTreeMap<ControlKind, Setting>) -> Result<()> {
+/// Sets each control, refusing a setting the camera does not take (with its range), then reads
+/// them back: a mode the camera did not take is refused, a value it rounded is said.
+fn apply(
+    stream: &mut dyn CameraStream,
+    settings: &BTreeMap<ControlKind, Setting>,
+    camera: &str,
+) -> Result<()> {
     if settings.is_empty() {
         return Ok(());
     }
@@ -73,6 +79,19 @@ fn apply(stream: &mut dyn CameraStream, settings: &BTreeMap<ControlKind, Setting
             .set_control(kind, setting)
             .map_err(anyhow::Error::msg)?;
     }
+    let reported = stream.controls();
+    for (&kind, &setting) in settings {
+        let now = reported
+            .iter()
+            .find(|state| state.kind == kind)
+            .map(|state| state.setting);
+        match controls::read_back(kind, setting, now).map_err(anyhow::Error::msg)? {
+            Some(note) => tracing::warn!(camera, "{note}"),
+            None => {
+                tracing::info!(camera, control = %kind, value = setting.parameter(), "control set (read back)")
+            }
+        }
+    }
     Ok(())
 }
 
@@ -81,7 +100,9 @@ pub struct CameraTopics {
     frame_id: String,
     compressed: Publisher<CompressedImage>,
     info: Publisher<CameraInfo>,
-    pub raw: Arc<Publisher<Image>>,
+    raw: Publisher<Image>,
+    /// image_raw's absolute name, whose readers the main thread counts.
+    pub raw_name: String,
     /// Whether frames are decoded and published on image_raw: --raw, or while image_raw has a
     /// subscriber (the main thread looks).
     pub raw_wanted: Arc<AtomicBool>,
@@ -95,7 +116,8 @@ impl CameraTopics {
             frame_id: topics::camera_optical_frame(name),
             compressed: node.publisher(&topic(topics::IMAGE_COMPRESSED), qos.clone())?,
             info: node.publisher(&topic(topics::CAMERA_INFO), qos.clone())?,
-            raw: Arc::new(node.publisher(&topic(topics::IMAGE_RAW), qos)?),
+            raw: node.publisher(&topic(topics::IMAGE_RAW), qos)?,
+            raw_name: node.names().resolve(&topic(topics::IMAGE_RAW)),
             raw_wanted: Arc::new(AtomicBool::new(raw)),
         })
     }
@@ -133,39 +155,64 @@ impl Camera {
                 Ok(frame) => {
                     if let Some(last) = last_sequence {
                         let missed = frame.sequence.wrapping_sub(last).saturating_sub(1);
-                        self.status().device_drops += u64::from(missed);
+                        let waited = latency(frame.captured, monotonic_now());
+                        let behind = waited.is_some_and(|waited| waited > self.frame_period);
+                        self.status().missed(missed, behind);
                     }
                     last_sequence = Some(frame.sequence);
                     self.publish(&frame);
                 }
                 Err(CaptureError::Timeout(_)) => self.status().timeouts += 1,
-                Err(CaptureError::Damaged(reason)) => {
-                    tracing::debug!(camera = %self.request.name, %reason, "frame dropped");
+                Err(CaptureError::Damaged { sequence, reason }) => {
+                    tracing::debug!(camera = %self.request.name, sequence, %reason, "damaged frame dropped");
+                    // Its sequence number is taken: the next frame does not follow a gap.
+                    last_sequence = Some(sequence);
                     self.status().broken_frames += 1;
                 }
                 Err(CaptureError::Gone(reason)) => {
                     tracing::warn!(camera = %self.request.name, %reason, "camera gone: reopening when it returns");
-                    {
-                        let mut status = self.status();
-                        status.unplugs += 1;
-                        status.streaming = false;
-                        status.state = format!("gone ({reason}): reopening when it returns");
-                    }
-                    // The old stream lets go of the device before it is opened again.
-                    drop(stream);
-                    let Some((mode, reopened)) = self.reopen() else {
+                    self.status().unplugs += 1;
+                    let why = format!("gone ({reason}): reopening when it returns");
+                    let Some(reopened) = self.restart(stream, why) else {
                         return;
                     };
                     (stream, last_sequence) = (reopened, None);
-                    self.frame_period = Duration::from_secs_f64(1.0 / mode.fps);
-                    tracing::info!(camera = %self.request.name, %mode, "camera back");
-                    self.report_controls(stream.as_mut());
-                    let mut status = self.status();
-                    status.streaming = true;
-                    status.state = mode.to_string();
+                }
+                Err(CaptureError::Failed(reason)) => {
+                    tracing::warn!(camera = %self.request.name, %reason, "the stream failed (the camera is still there): starting it again");
+                    self.status().stream_errors += 1;
+                    let why = format!("stream failed ({reason}): starting it again");
+                    let Some(reopened) = self.restart(stream, why) else {
+                        return;
+                    };
+                    (stream, last_sequence) = (reopened, None);
                 }
             }
         }
+    }
+
+    /// Closes `stream` and opens the camera again (with its settings) once it can; None at
+    /// shutdown. `why` is the state /diagnostics shows meanwhile.
+    fn restart(
+        &mut self,
+        stream: Box<dyn CameraStream>,
+        why: String,
+    ) -> Option<Box<dyn CameraStream>> {
+        {
+            let mut status = self.status();
+            status.streaming = false;
+            status.state = why;
+        }
+        // The old stream lets go of the device before it is opened again.
+        drop(stream);
+        let (mode, mut reopened) = self.reopen()?;
+        self.frame_period = Duration::from_secs_f64(1.0 / mode.fps);
+        tracing::info!(camera = %self.request.name, %mode, "camera back");
+        self.report_controls(reopened.as_mut());
+        let mut status = self.status();
+        status.streaming = true;
+        status.state = mode.to_string();
+        Some(reopened)
     }
 
     fn reopen(&mut self) -> Option<(Mode, Box<dyn CameraStream>)> {
@@ -187,9 +234,8 @@ impl Camera {
         }
         for (kind, setting) in changes {
             let one = BTreeMap::from([(kind, setting)]);
-            match apply(stream, &one) {
+            match apply(stream, &one, &self.request.name) {
                 Ok(()) => {
-                    tracing::info!(camera = %self.request.name, control = %kind, value = setting.parameter(), "control set");
                     self.settings.insert(kind, setting);
                 }
                 Err(error) => {
@@ -253,11 +299,28 @@ impl Camera {
                 data: jpeg,
             })
             .is_ok();
-        let latency = monotonic_now().saturating_sub(frame.captured);
+        let now = monotonic_now();
         let mut status = self.status();
-        status.published(latency.as_secs_f64() * 1e3);
-        if latency > self.frame_period {
-            status.late_frames += 1;
+        match latency(frame.captured, now) {
+            Some(latency) => {
+                status.published(latency.as_secs_f64() * 1e3);
+                if latency > self.frame_period {
+                    status.late_frames += 1;
+                }
+            }
+            None => {
+                status.published_stamped_ahead();
+                if status.stamped_ahead == 1 {
+                    let ahead_ms = (frame.captured - now).as_secs_f64() * 1e3;
+                    tracing::warn!(
+                        camera = %self.request.name,
+                        "a frame's capture instant is {ahead_ms:.1} ms after the node's clock: the \
+                         driver's timestamps are not start-of-capture on CLOCK_MONOTONIC \
+                         (end-of-frame stamps?); such frames are stamped when published and their \
+                         latency is not measured"
+                    );
+                }
+            }
         }
         drop(status);
         if !ok {

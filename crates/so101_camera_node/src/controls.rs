@@ -15,7 +15,7 @@ pub const AUTO: i64 = -1;
 pub enum ControlKind {
     /// Exposure time, in units of 100 µs (V4L2's exposure_time_absolute); AUTO: aperture priority.
     Exposure,
-    /// Sensor gain, in the camera's units; the camera has no automatic mode for it.
+    /// Sensor gain, in the camera's units; AUTO: automatic gain, where the camera has it.
     Gain,
     /// White balance temperature, K; AUTO: automatic white balance.
     WhiteBalance,
@@ -36,14 +36,12 @@ impl ControlKind {
         }
     }
 
-    pub fn has_auto(self) -> bool {
-        self != Self::Gain
-    }
-
     pub fn description(self) -> &'static str {
         match self {
             Self::Exposure => "exposure time, 100 µs units (-1: automatic)",
-            Self::Gain => "sensor gain, the camera's units",
+            Self::Gain => {
+                "sensor gain, the camera's units (-1: automatic, where the camera has it)"
+            }
             Self::WhiteBalance => "white balance temperature, K (-1: automatic)",
             Self::Focus => "focus distance, the camera's units (-1: autofocus)",
         }
@@ -63,7 +61,7 @@ impl ControlKind {
     pub fn auto_control(self) -> Option<u32> {
         match self {
             Self::Exposure => Some(cid::EXPOSURE_AUTO),
-            Self::Gain => None,
+            Self::Gain => Some(cid::AUTOGAIN),
             Self::WhiteBalance => Some(cid::AUTO_WHITE_BALANCE),
             Self::Focus => Some(cid::FOCUS_AUTO),
         }
@@ -82,6 +80,7 @@ pub mod cid {
     const USER_BASE: u32 = 0x0098_0900;
     const CAMERA_BASE: u32 = 0x009a_0900;
     pub const AUTO_WHITE_BALANCE: u32 = USER_BASE + 12;
+    pub const AUTOGAIN: u32 = USER_BASE + 18;
     pub const GAIN: u32 = USER_BASE + 19;
     pub const WHITE_BALANCE_TEMPERATURE: u32 = USER_BASE + 26;
     pub const EXPOSURE_AUTO: u32 = CAMERA_BASE + 1;
@@ -148,10 +147,11 @@ impl ControlState {
     }
 }
 
-/// The V4L2 control writes that make `setting` so, in order: the automatic mode off before a
-/// manual value (a camera ignores or refuses the value while its automatic mode is on).
-pub fn writes(kind: ControlKind, setting: Setting) -> Vec<(u32, i64)> {
-    let auto = kind.auto_control();
+/// The V4L2 control writes that make `setting` so on a camera that has (`has_auto`) or lacks the
+/// control's automatic mode, in order: the automatic mode off before a manual value (a camera
+/// ignores or refuses the value while its automatic mode is on).
+pub fn writes(kind: ControlKind, setting: Setting, has_auto: bool) -> Vec<(u32, i64)> {
+    let auto = kind.auto_control().filter(|_| has_auto);
     match (setting, auto) {
         (Setting::Auto, Some(id)) if kind == ControlKind::Exposure => {
             vec![(id, cid::EXPOSURE_APERTURE_PRIORITY)]
@@ -163,6 +163,30 @@ pub fn writes(kind: ControlKind, setting: Setting) -> Vec<(u32, i64)> {
         }
         (Setting::Manual(value), Some(id)) => vec![(id, 0), (kind.value_control(), value)],
         (Setting::Manual(value), None) => vec![(kind.value_control(), value)],
+    }
+}
+
+/// What the camera reports after `asked` was set: `Err` when it did not take the mode (a manual
+/// value left on automatic, or the reverse: the request is refused with what it reports),
+/// `Ok(Some(note))` when it took another value than asked (a driver rounding to its step: said,
+/// not refused), `Ok(None)` when it reports what was asked.
+pub fn read_back(
+    kind: ControlKind,
+    asked: Setting,
+    reported: Option<Setting>,
+) -> Result<Option<String>, String> {
+    match (asked, reported) {
+        (_, None) => Err(format!("{kind}: the camera no longer reports the control")),
+        (Setting::Manual(value), Some(Setting::Auto)) => Err(format!(
+            "{kind} set to {value}, but the camera still reports its automatic mode"
+        )),
+        (Setting::Auto, Some(Setting::Manual(value))) => Err(format!(
+            "{kind} set to automatic, but the camera reports a manual {value}"
+        )),
+        (Setting::Manual(value), Some(Setting::Manual(read))) if read != value => Ok(Some(
+            format!("{kind} set to {value}; the camera reports {read}"),
+        )),
+        _ => Ok(None),
     }
 }
 
@@ -199,8 +223,8 @@ impl FromStr for ControlRequest {
             .find(|kind| kind.key() == key)
             .ok_or_else(|| expected.clone())?;
         let setting = match value {
-            "auto" if kind.has_auto() => Setting::Auto,
-            "auto" => return Err(format!("--control {text:?}: {kind} has no automatic mode")),
+            // Whether the camera has an automatic mode is checked when it is opened.
+            "auto" => Setting::Auto,
             number => match number.parse::<i64>() {
                 Ok(value) if value >= 0 => Setting::Manual(value),
                 _ => return Err(expected),
@@ -221,31 +245,65 @@ mod tests {
     #[test]
     fn manual_values_switch_the_automatic_mode_off_first() {
         assert_eq!(
-            writes(ControlKind::Exposure, Setting::Manual(156)),
+            writes(ControlKind::Exposure, Setting::Manual(156), true),
             [(cid::EXPOSURE_AUTO, 1), (cid::EXPOSURE_ABSOLUTE, 156)]
         );
         assert_eq!(
-            writes(ControlKind::Exposure, Setting::Auto),
+            writes(ControlKind::Exposure, Setting::Auto, true),
             [(cid::EXPOSURE_AUTO, 3)]
         );
         assert_eq!(
-            writes(ControlKind::WhiteBalance, Setting::Manual(4000)),
+            writes(ControlKind::WhiteBalance, Setting::Manual(4000), true),
             [
                 (cid::AUTO_WHITE_BALANCE, 0),
                 (cid::WHITE_BALANCE_TEMPERATURE, 4000)
             ]
         );
         assert_eq!(
-            writes(ControlKind::Focus, Setting::Auto),
+            writes(ControlKind::Focus, Setting::Auto, true),
             [(cid::FOCUS_AUTO, 1)]
         );
+        // A camera with automatic gain (vivid, many webcams) ignores a gain while it is on.
         assert_eq!(
-            writes(ControlKind::Gain, Setting::Manual(40)),
+            writes(ControlKind::Gain, Setting::Manual(40), true),
+            [(cid::AUTOGAIN, 0), (cid::GAIN, 40)]
+        );
+        assert_eq!(
+            writes(ControlKind::Gain, Setting::Manual(40), false),
             [(cid::GAIN, 40)]
+        );
+        assert_eq!(
+            writes(ControlKind::Exposure, Setting::Manual(156), false),
+            [(cid::EXPOSURE_ABSOLUTE, 156)]
         );
         assert!(is_auto(ControlKind::Exposure, 3));
         assert!(!is_auto(ControlKind::Exposure, 1));
         assert!(!is_auto(ControlKind::Focus, 0));
+    }
+
+    #[test]
+    fn a_mode_the_camera_did_not_take_is_refused_and_a_rounded_value_is_said() {
+        let gain = ControlKind::Gain;
+        assert_eq!(
+            read_back(gain, Setting::Manual(10), Some(Setting::Manual(10))),
+            Ok(None)
+        );
+        assert_eq!(
+            read_back(gain, Setting::Auto, Some(Setting::Auto)),
+            Ok(None)
+        );
+        let still_auto = read_back(gain, Setting::Manual(10), Some(Setting::Auto)).unwrap_err();
+        assert!(
+            still_auto.contains("still reports its automatic mode"),
+            "{still_auto}"
+        );
+        assert!(read_back(gain, Setting::Auto, Some(Setting::Manual(3))).is_err());
+        let rounded = read_back(gain, Setting::Manual(10), Some(Setting::Manual(12)));
+        assert_eq!(
+            rounded,
+            Ok(Some("gain set to 10; the camera reports 12".into()))
+        );
+        assert!(read_back(gain, Setting::Manual(10), None).is_err());
     }
 
     #[test]
@@ -261,13 +319,7 @@ mod tests {
         );
         let request: ControlRequest = "top.exposure=156".parse().unwrap();
         assert_eq!(request.setting, Setting::Manual(156));
-        for bad in [
-            "top.exposure",
-            "top=5",
-            "top.iso=100",
-            "top.exposure=-5",
-            "top.gain=auto",
-        ] {
+        for bad in ["top.exposure", "top=5", "top.iso=100", "top.exposure=-5"] {
             assert!(bad.parse::<ControlRequest>().is_err(), "{bad}");
         }
     }

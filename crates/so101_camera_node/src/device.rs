@@ -28,12 +28,17 @@ pub enum CaptureError {
     /// No frame within the wait: the camera stalls (or is slow), it is still there.
     #[error("no frame within {0:?}")]
     Timeout(Duration),
-    /// The device went away (unplugged): the stream is over; reopen when it returns.
+    /// The device went away (unplugged, ENODEV): the stream is over; reopen when it returns.
     #[error("the camera is gone: {0}")]
     Gone(String),
-    /// The device delivered a frame it marks as corrupted (V4L2_BUF_FLAG_ERROR): dropped, counted.
-    #[error("a damaged frame: {0}")]
-    Damaged(String),
+    /// The stream failed while the device is still there (EIO: a USB or driver error): it is
+    /// started again.
+    #[error("the stream failed: {0}")]
+    Failed(String),
+    /// The device delivered frame `sequence` marked as corrupted (V4L2_BUF_FLAG_ERROR): dropped,
+    /// counted as broken (not as a gap in the sequence).
+    #[error("frame {sequence} is damaged: {reason}")]
+    Damaged { sequence: u32, reason: String },
 }
 
 #[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]

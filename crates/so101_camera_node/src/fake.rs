@@ -5,8 +5,11 @@
 //! - `WIDTHxHEIGHT@FPS`: the size and rate it offers (default 640x480@30; half the rate too);
 //! - `drop_every=N`: every Nth frame is lost in the device (its sequence number skips one);
 //! - `truncate_every=N`: every Nth frame arrives cut short (no JPEG end);
+//! - `damage_every=N`: every Nth frame is delivered marked damaged (V4L2_BUF_FLAG_ERROR);
 //! - `stall_at=K:SECONDS`: after frame K, no frame for SECONDS;
 //! - `unplug_at=K:SECONDS`: after frame K, the camera is gone for SECONDS, then back;
+//! - `fail_at=K`: after frame K, the stream fails once (EIO), the camera still there (each
+//!   stream it is opened again in fails so too);
 //! - `textured`: fine noise on the picture, so its JPEGs are as large as a webcam's (benchmarks).
 //!
 //! Its image controls: exposure (1..=5000, automatic at first), gain (0..=100, 32 at first) and
@@ -36,8 +39,10 @@ pub struct FakeSettings {
     pub fps: f64,
     pub drop_every: Option<u32>,
     pub truncate_every: Option<u32>,
+    pub damage_every: Option<u32>,
     pub stall: Option<(u32, Duration)>,
     pub unplug: Option<(u32, Duration)>,
+    pub fail_at: Option<u32>,
     /// Fine noise on the picture, so its JPEGs are as large as a webcam's (benchmarks).
     pub textured: bool,
 }
@@ -51,8 +56,10 @@ impl Default for FakeSettings {
             fps: DEFAULT_FPS,
             drop_every: None,
             truncate_every: None,
+            damage_every: None,
             stall: None,
             unplug: None,
+            fail_at: None,
             textured: false,
         }
     }
@@ -87,8 +94,12 @@ impl std::str::FromStr for FakeSettings {
                 Some(("truncate_every", n)) => {
                     settings.truncate_every = Some(every(n).ok_or_else(bad)?)
                 }
+                Some(("damage_every", n)) => {
+                    settings.damage_every = Some(every(n).ok_or_else(bad)?)
+                }
                 Some(("stall_at", at)) => settings.stall = Some(pause(at).ok_or_else(bad)?),
                 Some(("unplug_at", at)) => settings.unplug = Some(pause(at).ok_or_else(bad)?),
+                Some(("fail_at", k)) => settings.fail_at = Some(k.parse().map_err(|_| bad())?),
                 Some(_) => return Err(bad()),
             }
         }
@@ -213,6 +224,7 @@ impl CameraDevice for FakeCamera {
             start: monotonic_now(),
             next: 0,
             pause_until: None,
+            failed: false,
             controls: fake_controls(),
             encoded: vec![None; PICTURES],
         }))
@@ -226,6 +238,8 @@ struct FakeStream {
     start: Duration,
     next: u32,
     pause_until: Option<Duration>,
+    /// Whether this stream has had its `fail_at` failure.
+    failed: bool,
     controls: Vec<ControlState>,
     /// Each picture's bytes, encoded once: serving a frame then costs a copy, so a benchmark of
     /// the node measures the node.
@@ -314,6 +328,12 @@ impl CameraStream for FakeStream {
             return Err(CaptureError::Gone("fake camera unplugged".into()));
         }
         let s = self.camera.settings.clone();
+        if !self.failed && s.fail_at.is_some_and(|at| self.next > at) {
+            self.failed = true;
+            return Err(CaptureError::Failed(
+                "fake stream failed (Input/output error)".into(),
+            ));
+        }
         // The device's own losses: the frame is never delivered, its sequence number is used.
         if s.drop_every.is_some_and(|n| self.next % n == n - 1) {
             self.next += 1;
@@ -338,6 +358,12 @@ impl CameraStream for FakeStream {
             *gone = Some(due + seconds);
         }
         self.next += 1;
+        if s.damage_every.is_some_and(|n| frame.sequence % n == n - 1) {
+            return Err(CaptureError::Damaged {
+                sequence: frame.sequence,
+                reason: "marked corrupted by the fake".into(),
+            });
+        }
         Ok(frame)
     }
 
@@ -434,6 +460,28 @@ mod tests {
             .map(|f| whole_jpeg(&f.data).is_some())
             .collect();
         assert_eq!(whole, [true, true, false, true, true, false]);
+
+        let (_, mut damaging) = open("16x8@200,damage_every=3");
+        let results: Vec<Result<u32, CaptureError>> = (0..4)
+            .map(|_| damaging.next_frame(WAIT).map(|frame| frame.sequence))
+            .collect();
+        assert_eq!(results[..2], [Ok(0), Ok(1)]);
+        assert!(
+            matches!(results[2], Err(CaptureError::Damaged { sequence: 2, .. })),
+            "{results:?}"
+        );
+        assert_eq!(results[3], Ok(3));
+
+        let (_, mut failing) = open("16x8@200,fail_at=1");
+        let results: Vec<Result<u32, CaptureError>> = (0..4)
+            .map(|_| failing.next_frame(WAIT).map(|frame| frame.sequence))
+            .collect();
+        assert_eq!(results[..2], [Ok(0), Ok(1)]);
+        assert!(
+            matches!(results[2], Err(CaptureError::Failed(_))),
+            "{results:?}"
+        );
+        assert_eq!(results[3], Ok(2), "once per stream");
 
         let (_, mut stalling) = open("16x8@200,stall_at=1:1.0");
         let first = stalling.next_frame(WAIT).unwrap();

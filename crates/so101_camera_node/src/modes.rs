@@ -105,7 +105,8 @@ pub fn list(offered: &[OfferedMode]) -> String {
 }
 
 /// The mode for a request of `size` and `fps` (each optional): MJPEG before YUYV; without a size,
-/// 640x480 where offered, else the largest; without a rate, 30 where offered, else the highest.
+/// 640x480 where offered (at the rate asked), else the largest size offered at that rate; without
+/// a rate, 30 where offered, else the highest.
 pub fn choose(
     offered: &[OfferedMode],
     size: Option<(u32, u32)>,
@@ -119,33 +120,39 @@ pub fn choose(
             .iter()
             .filter(|mode| mode.format == format && !mode.rates.is_empty())
             .collect();
-        let at_size = match size {
-            Some((width, height)) => sizes
-                .iter()
-                .find(|mode| (mode.width, mode.height) == (width, height)),
-            None => sizes
-                .iter()
-                .find(|mode| (mode.width, mode.height) == DEFAULT_SIZE)
-                .or_else(|| sizes.iter().max_by_key(|mode| mode.width * mode.height)),
+        let mut candidates: Vec<&OfferedMode> = match size {
+            Some(asked) => sizes
+                .into_iter()
+                .filter(|mode| (mode.width, mode.height) == asked)
+                .collect(),
+            None => sizes,
         };
-        let Some(mode) = at_size else { continue };
-        let offers = |rate: f64| {
-            mode.rates
-                .iter()
-                .copied()
-                .find(|offered| (offered - rate).abs() < RATE_TOLERANCE)
-        };
-        let rate = match fps {
-            Some(fps) => offers(fps),
-            None => offers(DEFAULT_FPS).or_else(|| mode.rates.iter().copied().reduce(f64::max)),
-        };
-        if let Some(fps) = rate {
-            return Ok(Mode {
-                format,
-                width: mode.width,
-                height: mode.height,
-                fps,
-            });
+        // 640x480 first, then the larger sizes first.
+        candidates.sort_by_key(|mode| {
+            (
+                (mode.width, mode.height) != DEFAULT_SIZE,
+                std::cmp::Reverse(mode.width * mode.height),
+            )
+        });
+        for mode in candidates {
+            let offers = |rate: f64| {
+                mode.rates
+                    .iter()
+                    .copied()
+                    .find(|offered| (offered - rate).abs() < RATE_TOLERANCE)
+            };
+            let rate = match fps {
+                Some(fps) => offers(fps),
+                None => offers(DEFAULT_FPS).or_else(|| mode.rates.iter().copied().reduce(f64::max)),
+            };
+            if let Some(fps) = rate {
+                return Ok(Mode {
+                    format,
+                    width: mode.width,
+                    height: mode.height,
+                    fps,
+                });
+            }
         }
     }
     let requested = match (size, fps) {
@@ -224,6 +231,42 @@ mod tests {
             choose(&offered, None, None),
             Ok(mode(PixelFormat::Yuyv, 800, 600, 20.0))
         );
+    }
+
+    #[test]
+    fn a_rate_alone_takes_the_largest_size_offered_at_that_rate() {
+        // A camera like vivid's webcam input: 30 fps only at the sizes below 640x480.
+        let mode = |width, height, rates: &[f64]| OfferedMode {
+            format: PixelFormat::Yuyv,
+            width,
+            height,
+            rates: rates.to_vec(),
+        };
+        let offered = vec![
+            mode(320, 180, &[60.0, 30.0]),
+            mode(640, 360, &[60.0, 30.0]),
+            mode(640, 480, &[15.0, 10.0]),
+            mode(1280, 720, &[15.0]),
+            mode(1920, 1080, &[5.0]),
+        ];
+        assert_eq!(
+            choose(&offered, None, Some(30.0)),
+            Ok(super::Mode {
+                format: PixelFormat::Yuyv,
+                width: 640,
+                height: 360,
+                fps: 30.0
+            })
+        );
+        assert_eq!(
+            choose(&offered, None, None).map(|m| (m.width, m.height, m.fps)),
+            Ok((640, 480, 15.0))
+        );
+        assert_eq!(
+            choose(&offered, None, Some(5.0)).map(|m| (m.width, m.height)),
+            Ok((1920, 1080))
+        );
+        assert!(choose(&offered, None, Some(90.0)).is_err());
     }
 
     #[test]

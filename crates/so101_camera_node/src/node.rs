@@ -84,10 +84,16 @@ fn list_machine() {
         println!("no video device (/dev/video*) on this machine");
     }
     for node in nodes {
-        let modes = V4l2Camera::new(node.path.clone())
-            .modes()
-            .map_or_else(|error| error.to_string(), |offered| modes::list(&offered));
-        println!("{}: {modes}", discovery::describe(&node));
+        let about = match discovery::node_kind(&node.path) {
+            Ok(kind) => match kind.why_not_a_camera() {
+                Some(why) => why.to_owned(),
+                None => V4l2Camera::new(node.path.clone())
+                    .modes()
+                    .map_or_else(|error| error.to_string(), |offered| modes::list(&offered)),
+            },
+            Err(error) => error,
+        };
+        println!("{}: {about}", discovery::describe(&node));
     }
 }
 
@@ -222,7 +228,7 @@ pub fn run(args: Args) -> Result<()> {
         let (sender, control_changes) = channel();
         control_senders.insert(request.name.clone(), sender);
         let topics = CameraTopics::advertise(&mut node, &request.name, args.raw)?;
-        raw_topics.push((Arc::clone(&topics.raw), Arc::clone(&topics.raw_wanted)));
+        raw_topics.push((topics.raw_name.clone(), Arc::clone(&topics.raw_wanted)));
         let camera = Camera {
             topics,
             request: request.clone(),
@@ -248,8 +254,10 @@ pub fn run(args: Args) -> Result<()> {
         for change in parameters.changes() {
             forward_control_change(&change.name, &change.value, &control_senders);
         }
-        for (publisher, wanted) in &raw_topics {
-            let subscribed = publisher.get_subscription_count(node.node()) > 0;
+        for (name, wanted) in &raw_topics {
+            // Readers discovered on the topic (ros2-client's per-publisher count logs an error
+            // for every look until a reader has matched).
+            let subscribed = node.node().subscription_count(name) > 0;
             wanted.store(args.raw || subscribed, Ordering::Relaxed);
         }
         let elapsed = last_report.elapsed();

@@ -19,6 +19,26 @@ impl CameraStatus {
         }
         self.latencies_ms.push_back(latency_ms);
     }
+
+    /// Counts one published frame whose capture instant lies after the node's clock reading: the
+    /// driver's timestamps are not start-of-capture on CLOCK_MONOTONIC (end-of-frame stamps, or
+    /// another clock). Its latency is unknown, not zero.
+    pub fn published_stamped_ahead(&mut self) {
+        self.frames += 1;
+        self.stamped_ahead += 1;
+    }
+
+    /// Counts `missed` frames (a gap in the device's sequence before a frame), blaming the node
+    /// when that frame had waited more than a frame period to be taken (`behind`): the driver
+    /// drops a frame when every buffer is full because the node is slow, and a camera or USB
+    /// loss leaves the next frame fresh.
+    pub fn missed(&mut self, missed: u32, behind: bool) {
+        if behind {
+            self.node_drops += u64::from(missed);
+        } else {
+            self.device_drops += u64::from(missed);
+        }
+    }
 }
 
 /// `values` in ascending order, for [`quantile`].
@@ -42,16 +62,26 @@ pub fn summary(status: &CameraStatus, elapsed: Duration) -> String {
         (Some(p50), Some(p99)) => format!("latency p50 {p50:.1} ms, p99 {p99:.1} ms"),
         _ => "no latency (no frame)".to_owned(),
     };
+    let ahead = if status.stamped_ahead > 0 {
+        format!(
+            " ({} frames stamped after the node's clock: not measured)",
+            status.stamped_ahead
+        )
+    } else {
+        String::new()
+    };
     format!(
-        "{}: {} frames in {seconds:.1} s ({:.1} fps), {} dropped by the camera, {} broken, {} late, {} stalls, {} unplugs; capture to publish {latency}",
+        "{}: {} frames in {seconds:.1} s ({:.1} fps), {} dropped by the camera or USB, {} dropped while the node was behind, {} broken, {} late, {} stalls, {} unplugs, {} stream errors; capture to publish {latency}{ahead}",
         status.name,
         status.frames,
         status.frames as f64 / seconds,
         status.device_drops,
+        status.node_drops,
         status.broken_frames,
         status.late_frames,
         status.timeouts,
         status.unplugs,
+        status.stream_errors,
     )
 }
 
@@ -65,16 +95,22 @@ pub struct CameraStatus {
     pub streaming: bool,
     /// Frames published.
     pub frames: u64,
-    /// Frames lost in the device (gaps in its sequence numbers).
+    /// Frames lost in the camera or on USB (gaps in its sequence numbers before a fresh frame).
     pub device_drops: u64,
+    /// Frames the driver dropped while the node was behind (gaps before a frame that had waited).
+    pub node_drops: u64,
     /// Frames published more than a frame period after their capture.
     pub late_frames: u64,
-    /// Frames dropped here because they were not a whole JPEG.
+    /// Frames dropped here: marked damaged by the driver, or not a whole JPEG.
     pub broken_frames: u64,
     /// Waits for a frame that timed out (a stalled camera).
     pub timeouts: u64,
     /// Times the camera went away.
     pub unplugs: u64,
+    /// Times the stream failed with the camera still there (EIO) and was started again.
+    pub stream_errors: u64,
+    /// Frames whose capture instant lay after the node's clock (latency not measured).
+    pub stamped_ahead: u64,
     /// Capture to publish of the last frame, ms (late: over a frame period).
     pub latency_ms: f64,
     /// Capture to publish of the latest frames (up to [`LATENCY_SAMPLES`]), ms, for the summary.
@@ -104,10 +140,13 @@ pub fn diagnostic(status: &CameraStatus, fps: f64) -> DiagnosticStatus {
         value("fps", format!("{fps:.2}")),
         value("frames", status.frames.to_string()),
         value("device_drops", status.device_drops.to_string()),
+        value("node_drops", status.node_drops.to_string()),
         value("broken_frames", status.broken_frames.to_string()),
         value("late_frames", status.late_frames.to_string()),
         value("timeouts", status.timeouts.to_string()),
         value("unplugs", status.unplugs.to_string()),
+        value("stream_errors", status.stream_errors.to_string()),
+        value("stamped_ahead", status.stamped_ahead.to_string()),
         value("latency_ms", format!("{:.2}", status.latency_ms)),
     ];
     values.extend(
@@ -159,9 +198,10 @@ mod tests {
         }
         let line = summary(&status, Duration::from_secs(4));
         assert!(
-            line.starts_with("top: 100 frames in 4.0 s (25.0 fps), 2 dropped by the camera"),
+            line.starts_with("top: 100 frames in 4.0 s (25.0 fps), 2 dropped by the camera or USB, 0 dropped while the node was behind"),
             "{line}"
         );
+        assert!(!line.contains("stamped after"), "{line}");
         assert!(line.contains("latency p50 51.0 ms, p99 99.0 ms"), "{line}");
         let idle = summary(&CameraStatus::default(), Duration::from_secs(1));
         assert!(idle.contains("no latency"), "{idle}");
@@ -169,5 +209,28 @@ mod tests {
             status.published(latency as f64);
         }
         assert_eq!(status.latencies_ms.len(), LATENCY_SAMPLES);
+    }
+
+    #[test]
+    fn a_gap_before_a_frame_that_waited_is_the_node_s_and_a_frame_stamped_ahead_has_no_latency() {
+        let mut status = CameraStatus::default();
+        status.missed(2, false);
+        status.missed(3, true);
+        assert_eq!((status.device_drops, status.node_drops), (2, 3));
+        status.published_stamped_ahead();
+        assert_eq!((status.frames, status.stamped_ahead), (1, 1));
+        assert!(
+            status.latencies_ms.is_empty(),
+            "no latency of 0 ms is made up"
+        );
+        let line = summary(&status, Duration::from_secs(1));
+        assert!(
+            line.contains("3 dropped while the node was behind"),
+            "{line}"
+        );
+        assert!(
+            line.contains("1 frames stamped after the node's clock"),
+            "{line}"
+        );
     }
 }

@@ -1,11 +1,14 @@
 //! The cameras a machine has: each /dev/videoN with its name and its stable /dev/v4l/by-id and
 //! by-path links (a /dev/videoN number can change between boots and plugs; the by-id name of a
-//! camera does not). Reading the directories is I/O; matching and wording are pure.
+//! camera does not), and what each node is (a camera, metadata, an output: VIDIOC_QUERYCAP).
+//! Reading the directories and asking the nodes is I/O; matching and wording are pure.
 
 use std::{
     fs,
     path::{Path, PathBuf},
 };
+
+use v4l::capability::Flags;
 
 /// One video device node.
 #[derive(Debug, Clone, PartialEq, Eq)]
@@ -15,6 +18,61 @@ pub struct VideoNode {
     pub name: String,
     /// Links in /dev/v4l/by-id and /dev/v4l/by-path that point at it.
     pub stable_paths: Vec<PathBuf>,
+}
+
+/// What a video device node is. A UVC camera has two nodes (the frames, and metadata); a driver
+/// such as vivid also has output nodes; the node serves single-planar video capture only.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum NodeKind {
+    Camera,
+    Metadata,
+    Output,
+    MemoryToMemory,
+    MultiPlanar,
+    Other,
+}
+
+impl NodeKind {
+    /// From VIDIOC_QUERYCAP's device_caps (the node's own, not the whole device's).
+    pub fn of_caps(caps: Flags) -> Self {
+        if caps.intersects(Flags::VIDEO_M2M | Flags::VIDEO_M2M_MPLANE) {
+            Self::MemoryToMemory
+        } else if caps.contains(Flags::VIDEO_CAPTURE) {
+            Self::Camera
+        } else if caps.contains(Flags::VIDEO_CAPTURE_MPLANE) {
+            Self::MultiPlanar
+        } else if caps.contains(Flags::META_CAPTURE) {
+            Self::Metadata
+        } else if caps
+            .intersects(Flags::VIDEO_OUTPUT | Flags::VIDEO_OUTPUT_MPLANE | Flags::META_OUTPUT)
+        {
+            Self::Output
+        } else {
+            Self::Other
+        }
+    }
+
+    /// Why a node that is not a camera is not served.
+    pub fn why_not_a_camera(self) -> Option<&'static str> {
+        match self {
+            Self::Camera => None,
+            Self::Metadata => Some("not a camera: metadata (a UVC camera's second node)"),
+            Self::Output => Some("not a camera: an output"),
+            Self::MemoryToMemory => Some("not a camera: a memory-to-memory device (a codec)"),
+            Self::MultiPlanar => {
+                Some("multi-planar capture, which the node does not take (MJPG or YUYV cameras)")
+            }
+            Self::Other => Some("not a camera: no video capture"),
+        }
+    }
+}
+
+/// What the node at `path` is (VIDIOC_QUERYCAP).
+pub fn node_kind(path: &Path) -> Result<NodeKind, String> {
+    let caps = v4l::Device::with_path(path)
+        .and_then(|device| device.query_caps())
+        .map_err(|error| format!("cannot ask {} what it is: {error}", path.display()))?;
+    Ok(NodeKind::of_caps(caps.capabilities))
 }
 
 /// Every /dev/videoN, in index order. A UVC camera has two: the frames, and metadata (which lists
@@ -140,6 +198,24 @@ mod tests {
         let found = links_to(Path::new("/dev/video0"), &links);
         assert_eq!(found.len(), 2);
         assert!(found[0].starts_with("/dev/v4l/by-id"));
+    }
+
+    #[test]
+    fn only_single_planar_video_capture_nodes_are_cameras() {
+        // What vivid's and a UVC camera's nodes report (device_caps, with STREAMING and
+        // EXT_PIX_FORMAT set as drivers set them).
+        let with = |flag: Flags| NodeKind::of_caps(Flags::STREAMING | Flags::EXT_PIX_FORMAT | flag);
+        assert_eq!(with(Flags::VIDEO_CAPTURE), NodeKind::Camera);
+        assert_eq!(with(Flags::META_CAPTURE), NodeKind::Metadata);
+        assert_eq!(with(Flags::VIDEO_OUTPUT), NodeKind::Output);
+        assert_eq!(with(Flags::META_OUTPUT), NodeKind::Output);
+        assert_eq!(with(Flags::VIDEO_M2M), NodeKind::MemoryToMemory);
+        assert_eq!(with(Flags::VIDEO_CAPTURE_MPLANE), NodeKind::MultiPlanar);
+        assert_eq!(NodeKind::Camera.why_not_a_camera(), None);
+        assert!(NodeKind::Metadata
+            .why_not_a_camera()
+            .unwrap()
+            .contains("metadata"));
     }
 
     #[test]

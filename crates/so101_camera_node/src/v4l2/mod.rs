@@ -147,13 +147,13 @@ impl CameraStream for V4l2Stream {
             Err(error) if error.kind() == io::ErrorKind::TimedOut => {
                 return Err(CaptureError::Timeout(timeout))
             }
-            Err(error) => return Err(CaptureError::Gone(gone_reason(&self.path, &error))),
+            Err(error) => return Err(capture_error(&self.path, &error)),
         };
         if metadata.flags.contains(Flags::ERROR) {
-            return Err(CaptureError::Damaged(format!(
-                "frame {} marked corrupted by the driver",
-                metadata.sequence
-            )));
+            return Err(CaptureError::Damaged {
+                sequence: metadata.sequence,
+                reason: "marked corrupted by the driver".into(),
+            });
         }
         let used = (metadata.bytesused as usize).min(buffer.len());
         let data = match self.mode.format {
@@ -183,7 +183,8 @@ impl CameraStream for V4l2Stream {
     }
 
     fn set_control(&mut self, kind: ControlKind, setting: Setting) -> Result<(), String> {
-        for (id, value) in controls::writes(kind, setting) {
+        let has_auto = control_state(&self.device, kind).is_some_and(|state| state.has_auto);
+        for (id, value) in controls::writes(kind, setting, has_auto) {
             self.device
                 .set_control(Control {
                     id,
@@ -207,11 +208,13 @@ impl Drop for V4l2Stream {
     }
 }
 
-fn gone_reason(path: &Path, error: &io::Error) -> String {
+/// A failed dequeue: ENODEV is an unplug; anything else (EIO: a USB or driver error, which the
+/// V4L2 spec allows to be temporary) is a stream to start again, the camera still there.
+fn capture_error(path: &Path, error: &io::Error) -> CaptureError {
     if error.raw_os_error() == Some(ENODEV) {
-        format!("{} unplugged", path.display())
+        CaptureError::Gone(format!("{} unplugged", path.display()))
     } else {
-        format!("{}: {error}", path.display())
+        CaptureError::Failed(format!("{}: {error}", path.display()))
     }
 }
 
@@ -252,6 +255,7 @@ mod tests {
             sys::V4L2_CID_EXPOSURE_ABSOLUTE
         );
         assert_eq!(controls::cid::GAIN, sys::V4L2_CID_GAIN);
+        assert_eq!(controls::cid::AUTOGAIN, sys::V4L2_CID_AUTOGAIN);
         assert_eq!(
             controls::cid::AUTO_WHITE_BALANCE,
             sys::V4L2_CID_AUTO_WHITE_BALANCE
@@ -265,6 +269,18 @@ mod tests {
         assert_eq!(
             controls::cid::EXPOSURE_APERTURE_PRIORITY,
             i64::from(sys::v4l2_exposure_auto_type_V4L2_EXPOSURE_APERTURE_PRIORITY)
+        );
+    }
+
+    #[test]
+    fn only_enodev_is_an_unplug() {
+        let path = Path::new("/dev/video0");
+        let gone = capture_error(path, &io::Error::from_raw_os_error(ENODEV));
+        assert_eq!(gone, CaptureError::Gone("/dev/video0 unplugged".into()));
+        let eio = capture_error(path, &io::Error::from_raw_os_error(5));
+        assert!(
+            matches!(eio, CaptureError::Failed(ref why) if why.contains("/dev/video0")),
+            "{eio:?}"
         );
     }
 
