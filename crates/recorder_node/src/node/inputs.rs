@@ -16,7 +16,7 @@ use rustdds::{
     DataReaderStatus, RTPSEntity, StatusEvented, GUID,
 };
 use so101_core::ros::{qos, rate_limit::RateLimiter, RosNode};
-use so101_msgs::TypeInfo;
+use so101_msgs::{std_srvs::TriggerResponse, TypeInfo};
 
 use super::{
     intake::{ns_from_ticks, reader_depth, LogClock, Losses, DEPTH},
@@ -225,9 +225,10 @@ impl Inputs {
         self.selection = selection;
     }
 
-    /// The topics the selection wants that have a publisher whose samples would not reach the
-    /// recorder yet (see `readiness`). Its own publishers (rosout, parameter events) do not count.
-    pub fn waiting(&mut self, node: &RosNode) -> Vec<String> {
+    /// /recorder/ready's answer: whether every publisher of a topic the selection wants reaches
+    /// the recorder, else which topics wait (see `readiness`). Its own publishers (rosout,
+    /// parameter events) do not count.
+    pub fn readiness(&mut self, node: &RosNode) -> TriggerResponse {
         for input in &mut self.inputs {
             input.take_statuses();
         }
@@ -255,10 +256,7 @@ impl Inputs {
             };
             Some((name.as_str(), reception))
         });
-        readiness::waiting_topics(receptions)
-            .into_iter()
-            .map(str::to_owned)
-            .collect()
+        readiness::answer(&readiness::waiting_topics(receptions))
     }
 
     /// Waits for data (at most RECEIVE_WAIT) and hands every sample to the writer.

@@ -110,9 +110,7 @@ pub fn run(args: Args) -> Result<()> {
         if !asked.is_empty() {
             // Publishers found since the last discovery get their readers now, not a second later.
             inputs.discover(&mut node, &sender);
-            let waiting = inputs.waiting(&node);
-            let waiting: Vec<&str> = waiting.iter().map(String::as_str).collect();
-            control.answer_ready_requests(asked, &readiness::answer(&waiting));
+            control.answer_ready_requests(asked, &inputs.readiness(&node));
         }
         inputs.receive(&sender, &budget);
     }
