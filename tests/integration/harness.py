@@ -322,14 +322,14 @@ class Probe:
     def publisher(self, topic: str, msg_type, qos=None, wait_for_subscriber: float | None = 10.0, sim: SimNode | None = None):
         pub = self.node.create_publisher(msg_type, topic, qos if qos is not None else reliable_qos())
         if wait_for_subscriber:
-            wait_until(lambda: pub.get_subscription_count() >= 1, wait_for_subscriber, f"a subscriber of {topic}", sim)
+            self.wait_for_graph(lambda: pub.get_subscription_count() >= 1, wait_for_subscriber, f"a subscriber of {topic}", sim)
         return pub
 
     # ---- services
     def call(self, srv_type, name: str, request=None, timeout: float = 10.0, sim: SimNode | None = None):
         client = self.node.create_client(srv_type, name)
         try:
-            wait_until(client.service_is_ready, timeout, f"service {name}", sim)
+            self.wait_for_graph(client.service_is_ready, timeout, f"service {name}", sim)
             future = client.call_async(request if request is not None else srv_type.Request())
             wait_until(future.done, timeout, f"the response of {name}", sim)
             if future.exception() is not None:
@@ -345,11 +345,31 @@ class Probe:
     def services(self) -> dict[str, list[str]]:
         return dict(self.node.get_service_names_and_types())
 
+    def graph_report(self) -> str:
+        """What this probe's DDS participant has discovered: on a discovery timeout it tells a
+        participant never seen (no node) from endpoints never matched (node, no topic)."""
+        nodes = sorted(f"{ns.rstrip('/')}/{name}" for name, ns in self.node.get_node_names_and_namespaces())
+        topics = {
+            topic: (self.node.count_publishers(topic), self.node.count_subscribers(topic)) for topic in sorted(self.topics())
+        }
+        services = sorted(self.services())
+        return f"the probe sees nodes {nodes}, topics (publishers, subscribers) {topics}, services {services}"
+
+    def wait_for_graph(self, predicate: Callable[[], bool], timeout: float, what: str, node=None) -> None:
+        """wait_until for a discovery condition, reporting the probe's view of the graph on timeout."""
+        wait_until(predicate, timeout, what, node, explain=self.graph_report)
+
 
 def wait_until(
-    predicate: Callable[[], bool], timeout: float, what: str, sim: SimNode | None = None, period: float = 0.02
+    predicate: Callable[[], bool],
+    timeout: float,
+    what: str,
+    sim: SimNode | None = None,
+    period: float = 0.02,
+    explain: Callable[[], str] | None = None,
 ) -> None:
-    """Poll predicate; fail the test naming `what` on timeout, or at once if the node died."""
+    """Poll predicate; fail the test naming `what` (and `explain()`) on timeout, or at once if the
+    node died."""
     deadline = time.monotonic() + timeout
     while True:
         if predicate():
@@ -357,7 +377,8 @@ def wait_until(
         if sim is not None:
             sim.assert_alive()
         if time.monotonic() >= deadline:
-            pytest.fail(f"timeout after {timeout:.1f} s waiting for {what}", pytrace=False)
+            detail = f": {explain()}" if explain is not None else ""
+            pytest.fail(f"timeout after {timeout:.1f} s waiting for {what}{detail}", pytrace=False)
         time.sleep(period)
 
 

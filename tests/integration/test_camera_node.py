@@ -281,7 +281,7 @@ def test_rerun_shows_the_camera_node_s_jpeg_frames(ros, tmp_path):
         env=node_environment(),
     )
     try:
-        wait_until(lambda: ros.node.count_subscribers("/camera/top/image_raw/compressed") >= 1, 20.0, "the bridge", node)
+        ros.wait_for_graph(lambda: ros.node.count_subscribers("/camera/top/image_raw/compressed") >= 1, 20.0, "the bridge", node)
         time.sleep(2.0)
     finally:
         bridge.send_signal(signal.SIGINT)  # it flushes the recording and exits

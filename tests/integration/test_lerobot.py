@@ -44,7 +44,7 @@ def test_expert_bags_become_a_lerobot_dataset_that_lerobot_loads_and_replays(
 ):
     sim = sim_factory("--speed", "2", "--seed", "3", "--cameras", "top:64x48,wrist:64x48", "--camera-rate", "30")
     recorder = recorder_factory()
-    wait_until(lambda: ros.node.count_subscribers("/episode/events") >= 1, 20.0, "the recorder", sim)
+    ros.wait_for_graph(lambda: ros.node.count_subscribers("/episode/events") >= 1, 20.0, "the recorder", sim)
     teleop = teleop_factory("--source", "expert", "--sim-time", "--episodes", "2", "--seed", "2")
     wait_until(lambda: not teleop.alive(), 120.0, "the expert's 2 episodes", sim)
     bags = recorder.output

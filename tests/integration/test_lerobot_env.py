@@ -56,7 +56,7 @@ def dataset(tmp_path_factory) -> Path:
     probe = Probe(context, "so101_env_test_probe")
     try:
         nodes.append(SimNode(node_binary("recorder_node"), ["--output", str(bags)], tmp / "recorder.log"))
-        wait_until(lambda: probe.node.count_subscribers("/episode/events") >= 1, 20.0, "the recorder", sim)
+        probe.wait_for_graph(lambda: probe.node.count_subscribers("/episode/events") >= 1, 20.0, "the recorder", sim)
         expert = SimNode(
             node_binary("teleop_node"), ["--source", "expert", "--sim-time", "--episodes", "2", "--seed", "2"], tmp / "teleop.log"
         )

@@ -63,7 +63,7 @@ def test_a_tiny_act_trained_on_a_converted_dataset_runs_through_the_runner(
     # Demonstrations: one expert episode, recorded and converted.
     sim = sim_factory("--speed", "2", "--seed", "5", "--cameras", CAMERAS)
     recorder = recorder_factory()
-    wait_until(lambda: ros.node.count_subscribers("/episode/events") >= 1, 20.0, "the recorder", sim)
+    ros.wait_for_graph(lambda: ros.node.count_subscribers("/episode/events") >= 1, 20.0, "the recorder", sim)
     teleop = teleop_factory("--source", "expert", "--sim-time", "--episodes", "1", "--seed", "5")
     wait_until(lambda: not teleop.alive(), 90.0, "the expert's episode", sim)
     wait_until(lambda: (recorder.output / "episode_000000" / "metadata.yaml").is_file(), 20.0, "the closed episode", sim)

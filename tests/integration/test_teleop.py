@@ -315,7 +315,7 @@ def test_the_expert_puts_the_cube_in_the_bin_in_seeded_episodes_and_the_recorder
     sim = sim_factory("--speed", "3", "--seed", "11")
     recorder = recorder_factory()
     events = ros.subscribe("/episode/events", String, reliable_qos(1000))
-    wait_until(
+    ros.wait_for_graph(
         lambda: ros.node.count_subscribers("/episode/events") >= 2, 20.0, "the recorder's /episode/events subscription", sim
     )
     report = tmp_path / "expert.json"
