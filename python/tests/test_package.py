@@ -45,6 +45,7 @@ def test_camera_topics_follow_the_contract():
         "so101-learn",
         "so101-sysid",
         "so101-description",
+        "so101-camera-align",
     ],
 )
 def test_every_console_entry_point_answers_help(tool):

@@ -24,8 +24,9 @@ MAY_IMPORT = {
     "lerobot": {"shared", "dataset", "stack", "envs", "evaluate"},
     "learn": {"shared", "dataset", "stack", "envs", "evaluate", "lerobot"},
     "sysid": {"shared", "dataset", "stack", "envs", "evaluate"},
-    "bench": {"shared", "dataset", "stack", "envs", "evaluate", "lerobot", "learn", "sysid"},
+    "bench": {"shared", "dataset", "stack", "envs", "evaluate", "lerobot", "learn", "sysid", "cameras"},
     "tools": {"shared", "stack", "envs"},
+    "cameras": {"shared"},
 }
 
 

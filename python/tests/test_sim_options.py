@@ -169,3 +169,32 @@ def test_so101_run_policy_reads_randomize_as_written(ranges, capsys):
     with pytest.raises(SystemExit):
         parser().parse_args(["P", "--servo-params", "sts3250"])
     assert "sts3215, gain80 or a so101-sysid fit file" in capsys.readouterr().err
+
+
+def test_camera_poses_none_empty_or_a_toml_file_reaches_every_door(native, tmp_path, monkeypatch):
+    import draccus
+    from lerobot.utils.import_utils import register_third_party_plugins
+
+    from so101.evaluate.run_policy import parser
+    from so101.sim_options import camera_poses_spec
+
+    poses = tmp_path / "camera_poses.toml"
+    poses.write_text("[top]\n")
+    monkeypatch.chdir(tmp_path)
+    assert camera_poses_spec(None) is None and camera_poses_spec("") is None
+    assert camera_poses_spec("camera_poses.toml") == camera_poses_spec(poses) == str(poses.resolve())
+    for bad, error in (("missing.toml", ValueError), ("ranges.json", ValueError), (3, TypeError)):
+        with pytest.raises(error, match="so101-camera-align's file"):
+            camera_poses_spec(bad)
+
+    worlds, batches = native
+    gym.make("so101/CubeToBin-v0", camera_poses=poses).close()
+    assert worlds[-1]["camera_poses"] == str(poses.resolve())
+    gym.make_vec("so101/CubeToBin-v0", num_envs=2).close()
+    assert batches[-1]["camera_poses"] is None
+    register_third_party_plugins()
+    env = draccus.parse(EnvHolder, args=["--env.type=so101_sim", "--env.camera_poses=camera_poses.toml"]).env
+    gym.make(env.gym_id, **env.gym_kwargs).close()
+    assert worlds[-1]["camera_poses"] == str(poses.resolve())
+    assert parser().parse_args(["P", "--camera-poses", "camera_poses.toml"]).camera_poses == str(poses.resolve())
+    assert parser().parse_args(["P"]).camera_poses is None

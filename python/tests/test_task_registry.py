@@ -46,7 +46,17 @@ TASKS = list(contract.TASKS.values())
 class FakeWorld:
     """so101_native.World's interface: every step succeeds."""
 
-    def __init__(self, scene, lite=True, task="", control_rate=0.0, dense_reward=False, servo_params="sts3215", randomize="off"):
+    def __init__(
+        self,
+        scene,
+        lite=True,
+        task="",
+        control_rate=0.0,
+        dense_reward=False,
+        servo_params="sts3215",
+        randomize="off",
+        camera_poses=None,
+    ):
         self.task, self.control_rate, self.success, self.cameras = task, control_rate, False, {}
         self.episode_settings = json.dumps({"servo_model": servo_params, "draw": None})
 
@@ -81,6 +91,7 @@ class FakeWorldBatch:
         threads=0,
         servo_params="sts3215",
         randomize="off",
+        camera_poses=None,
     ):
         self.task, self.control_rate = task, control_rate
         self.successes = np.zeros(num_envs, dtype=bool)

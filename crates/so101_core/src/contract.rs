@@ -92,6 +92,9 @@ pub mod actions {
 /// The cameras of the simulated scene, in the order the sim starts them.
 pub const CAMERA_NAMES: [&str; 3] = ["top", "front", "wrist"];
 
+/// The cameras that ride the arm: they move with it, so no board on the table places them.
+pub const CAMERAS_ON_THE_ARM: [&str; 1] = ["wrist"];
+
 /// The Python module `so101.contract` with the same facts (the text of python/src/so101/contract.py).
 pub fn python_module() -> String {
     let mut out = String::from(
@@ -113,6 +116,11 @@ pub fn python_module() -> String {
     }
     out += ")\n";
     out += &format!("CAMERA_NAMES = ({})\n", quoted(&CAMERA_NAMES));
+    out += &format!("CAMERAS_ON_THE_ARM = ({},)\n", quoted(&CAMERAS_ON_THE_ARM));
+    out += &format!(
+        "# The arm's base body: its frame is the base frame cameras are placed in.\nBASE_LINK = \"{}\"\n",
+        crate::kinematics::BASE_LINK
+    );
     out += &format!(
         "# The STS3215's magnetic encoder: ticks per revolution.\nENCODER_TICKS_PER_REVOLUTION = {}\n",
         crate::servo::TICKS_PER_REVOLUTION

@@ -12,9 +12,12 @@ use so101_core::{
     servo::{ServoModelSpec, GAIN80, STS3215},
     task::{TaskKind, CONTROL_RATE_HZ},
 };
-use so101_sim::randomization::{
-    spec::{DEFAULT, OFF},
-    RandomizationSpec,
+use so101_sim::{
+    cameras::placement::CameraPlacements,
+    randomization::{
+        spec::{DEFAULT, OFF},
+        RandomizationSpec,
+    },
 };
 
 /// How every world of a World or WorldBatch is made, besides its scene.
@@ -33,6 +36,9 @@ pub struct WorldOptions {
     /// True (the default ranges), False, "off", "default" or a file of ranges (.toml; str or
     /// os.PathLike).
     pub randomize: RandomizationSpec,
+    /// Where the user's real cameras stand (so101-camera-align's file; str or os.PathLike), or
+    /// None: the scene's own placements.
+    pub camera_poses: Option<CameraPlacements>,
 }
 
 impl Default for WorldOptions {
@@ -45,6 +51,7 @@ impl Default for WorldOptions {
             seed: 0,
             servo_params: ServoModelSpec::default(),
             randomize: RandomizationSpec::off(),
+            camera_poses: None,
         }
     }
 }
@@ -64,6 +71,7 @@ impl WorldOptions {
                 "seed" => value.extract().map(|seed| options.seed = seed),
                 "servo_params" => servo_model(&value).map(|model| options.servo_params = model),
                 "randomize" => randomization(&value).map(|spec| options.randomize = spec),
+                "camera_poses" => camera_placements(&value).map(|file| options.camera_poses = file),
                 _ => {
                     return Err(PyTypeError::new_err(format!(
                         "{class}() got an unexpected keyword argument '{key}'"
@@ -143,4 +151,20 @@ fn randomization(value: &Bound<'_, PyAny>) -> PyResult<RandomizationSpec> {
         )));
     };
     spec.map_err(|error| PyValueError::new_err(error.to_string()))
+}
+
+/// None, or a camera placements file (str or os.PathLike), read now.
+fn camera_placements(value: &Bound<'_, PyAny>) -> PyResult<Option<CameraPlacements>> {
+    if value.is_none() {
+        return Ok(None);
+    }
+    let path: PathBuf = value.extract().map_err(|_| {
+        PyTypeError::new_err(format!(
+            "None or a file of camera placements (str or os.PathLike), not {}",
+            type_name(value)
+        ))
+    })?;
+    CameraPlacements::load(&path)
+        .map(Some)
+        .map_err(|error| PyValueError::new_err(error.to_string()))
 }

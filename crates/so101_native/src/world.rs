@@ -26,8 +26,13 @@ impl WorldSpec {
     /// Loads the scene and binds a task environment with the placement sequence of `seed`.
     pub fn build(&self, seed: u64) -> PyResult<TaskEnv> {
         let options = &self.options;
-        let simulation = scene::load(self.scene.as_ref(), options.lite)
+        let mut simulation = scene::load(self.scene.as_ref(), options.lite)
             .map_err(|error| PyValueError::new_err(format!("{error:#}")))?;
+        if let Some(placements) = &options.camera_poses {
+            placements
+                .apply(&mut simulation)
+                .map_err(|error| PyValueError::new_err(error.to_string()))?;
+        }
         let settings = TaskSettings {
             kind: options.task,
             dense_reward: options.dense_reward,
@@ -76,8 +81,9 @@ pub fn limits_array<'py>(py: Python<'py>, env: &TaskEnv) -> Bound<'py, PyArray2<
 ///
 /// Keyword options (WorldBatch's too): lite (the mesh-free scene; default), task, control_rate
 /// (Hz; default the policy's control rate), dense_reward, seed, servo_params (a model's name or a
-/// so101-sysid parameter file, str or os.PathLike; default the STS3215 model) and randomize
-/// (True: the default ranges, False, "off", "default" or a file of ranges; default off).
+/// so101-sysid parameter file, str or os.PathLike; default the STS3215 model), randomize
+/// (True: the default ranges, False, "off", "default" or a file of ranges; default off) and
+/// camera_poses (so101-camera-align's file of real camera placements; default None).
 #[pyclass(module = "so101_native")]
 pub struct World {
     // In a Mutex only so the class is Sync, as PyO3 requires; every method takes `&mut self`

@@ -10,7 +10,10 @@ use so101_core::{
 };
 
 use so101_sim::{
-    cameras::spec::{self, CameraList, FrameSize},
+    cameras::{
+        placement::CameraPlacements,
+        spec::{self, CameraList, CameraSpec, FrameSize},
+    },
     offscreen::RendererChoice,
     randomization::{spec as randomization, RandomizationSpec},
     task::TaskKind,
@@ -99,11 +102,37 @@ pub struct Args {
     /// /sim/episode.
     #[arg(long, default_value = randomization::OFF, value_parser = RandomizationSpec::from_str)]
     pub randomize: RandomizationSpec,
+    /// Where your real cameras stand: a file from `so101-camera-align estimate` (.toml) placing
+    /// cameras fixed in the world (pose in the arm's base frame, field of view, frame size).
+    /// Randomization jitters around these places; a placed camera renders at the file's size
+    /// unless --cameras names one.
+    #[arg(long, value_parser = parse_camera_placements)]
+    pub camera_poses: Option<CameraPlacements>,
     /// Exit cleanly after this many seconds of wall time.
     #[arg(long, value_parser = parse_duration)]
     pub duration: Option<f64>,
     #[command(flatten)]
     pub node: NodeArgs,
+}
+
+impl Args {
+    /// The cameras to render: a camera the placements file places takes its size from there
+    /// unless --cameras names one.
+    pub fn camera_specs(&self) -> Vec<CameraSpec> {
+        let placed = |name: &str| {
+            self.camera_poses
+                .as_ref()
+                .and_then(|placements| placements.size(name))
+        };
+        self.cameras.resolve(
+            |name| placed(name).unwrap_or(self.camera_size),
+            self.camera_rate,
+        )
+    }
+}
+
+fn parse_camera_placements(text: &str) -> Result<CameraPlacements, String> {
+    CameraPlacements::load(std::path::Path::new(text)).map_err(|error| error.to_string())
 }
 
 pub fn default_scene() -> &'static str {
@@ -171,10 +200,42 @@ mod tests {
                 "/nonexistent/ranges.toml",
                 "/nonexistent/ranges.toml",
             ),
+            (
+                "--camera-poses",
+                "/nonexistent/camera_poses.toml",
+                "/nonexistent/camera_poses.toml",
+            ),
         ] {
             let error = Args::try_parse_from(["so101_sim_node", option, value]).unwrap_err();
             assert_eq!(error.kind(), ErrorKind::ValueValidation, "{error}");
             assert!(error.to_string().contains(says), "{error}");
         }
+    }
+
+    #[test]
+    fn a_placed_camera_renders_at_the_file_size_unless_cameras_names_one() {
+        let file =
+            std::env::temp_dir().join(format!("so101_cli_poses_{}.toml", std::process::id()));
+        std::fs::write(
+            &file,
+            "[front]\nposition = [0.6, 0.0, 0.3]\nquaternion = [1.0, 0.0, 0.0, 0.0]\nfovy = 50.0\nwidth = 1280\nheight = 720\n",
+        )
+        .unwrap();
+        let path = file.to_str().unwrap();
+        let args = Args::parse_from([
+            "so101_sim_node",
+            "--camera-poses",
+            path,
+            "--cameras",
+            "top,front,wrist:64x48",
+        ]);
+        std::fs::remove_file(&file).unwrap();
+        let sizes: Vec<String> = args
+            .camera_specs()
+            .iter()
+            .map(|camera| format!("{}:{}", camera.name, camera.size))
+            .collect();
+        assert_eq!(sizes, ["top:640x480", "front:1280x720", "wrist:64x48"]);
+        assert_eq!(args.camera_poses.unwrap().source, path);
     }
 }

@@ -30,8 +30,7 @@ pub fn declarations(args: &Args, limits: &[JointLimit; JOINT_COUNT]) -> Paramete
         TimeMode::Lockstep => "lockstep".to_owned(),
     };
     let cameras = args
-        .cameras
-        .resolve(args.camera_size, args.camera_rate)
+        .camera_specs()
         .iter()
         .map(|camera| format!("{}:{}@{}", camera.name, camera.size, camera.rate))
         .collect();
@@ -58,6 +57,17 @@ pub fn declarations(args: &Args, limits: &[JointLimit; JOINT_COUNT]) -> Paramete
             .effect(&format!(
                 "Served as \"{OFF}\", \"{DEFAULT}\" or the file's path."
             )),
+        options
+            .declare(
+                "camera_poses",
+                text(
+                    &args
+                        .camera_poses
+                        .as_ref()
+                        .map_or("", |placements| &placements.source),
+                ),
+            )
+            .effect("Served as the file's path, empty without one."),
         options
             .declare("speed", Value::String(speed))
             .effect("\"lockstep\" under --lockstep."),

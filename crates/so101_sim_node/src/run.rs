@@ -50,7 +50,11 @@ const LOCKSTEP_BUSY_FOR: Duration = Duration::from_millis(200);
 
 /// Loads the scene, starts the node and runs the loop until a signal or `--duration`.
 pub fn run(args: Args) -> Result<()> {
-    let simulation = scene::load(&args.scene, args.lite)?;
+    let mut simulation = scene::load(&args.scene, args.lite)?;
+    if let Some(placements) = &args.camera_poses {
+        placements.apply(&mut simulation)?;
+        tracing::info!(file = %placements.source, cameras = ?placements.cameras.keys().collect::<Vec<_>>(), "cameras placed");
+    }
     let settings = TaskSettings {
         kind: args.task,
         dense_reward: args.dense_reward,
@@ -124,7 +128,7 @@ fn start_cameras(
     env: &TaskEnv,
     node: &mut RosNode,
 ) -> Result<Option<CameraRig>> {
-    let specs = args.cameras.resolve(args.camera_size, args.camera_rate);
+    let specs = args.camera_specs();
     if specs.is_empty() {
         return Ok(None);
     }

@@ -14,6 +14,9 @@ JOINT_LIMITS = (
     (-0.1745, 1.7453),
 )
 CAMERA_NAMES = ("top", "front", "wrist")
+CAMERAS_ON_THE_ARM = ("wrist",)
+# The arm's base body: its frame is the base frame cameras are placed in.
+BASE_LINK = "base"
 # The STS3215's magnetic encoder: ticks per revolution.
 ENCODER_TICKS_PER_REVOLUTION = 4096
 # The servo models known by name (anything else is a so101-sysid parameter file), and the

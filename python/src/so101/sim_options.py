@@ -4,6 +4,8 @@
   randomize     True or "true" / "default": the default ranges (assets/randomization.toml);
                 False or "false" / "off": none; a path (str or os.PathLike) to a .toml of ranges
   servo_params  a servo model by name (SERVO_MODELS) or a path to a so101-sysid fit file (.json)
+  camera_poses  None (or "") for the scene's cameras, or a path to so101-camera-align's file
+                (.toml) placing the cameras where the user's real ones stand
 
 The Gymnasium envs, LeRobot's env type (`--env.randomize=true` arrives as the string "true") and
 the CLIs all normalize here, so each spelling means the same everywhere and anything else is
@@ -49,6 +51,16 @@ def servo_params_spec(value: object) -> str:
     raise TypeError(f"servo_params={value!r} ({type(value).__name__}): {accepted}")
 
 
+def camera_poses_spec(value: object) -> str | None:
+    """`camera_poses` as the simulation takes it: None or the path of a .toml file."""
+    if value is None or (isinstance(value, str) and not value.strip()):
+        return None
+    accepted = "None or so101-camera-align's file of camera placements (.toml)"
+    if isinstance(value, (str, os.PathLike)):
+        return _existing_file(value, ".toml", "camera_poses", accepted)
+    raise TypeError(f"camera_poses={value!r} ({type(value).__name__}): {accepted}")
+
+
 def _existing_file(value: str | os.PathLike, suffix: str | None, option: str, accepted: str) -> str:
     path = Path(os.fspath(value)).expanduser()
     if suffix and path.suffix != suffix:
@@ -60,7 +72,8 @@ def _existing_file(value: str | os.PathLike, suffix: str | None, option: str, ac
 
 
 def add_arguments(parser: argparse.ArgumentParser | argparse._ArgumentGroup) -> None:
-    """--servo-params and --randomize as every CLI that starts a simulation takes them."""
+    """--servo-params, --randomize and --camera-poses as every CLI that starts a simulation takes
+    them."""
     parser.add_argument(
         "--servo-params",
         type=servo_params_argument,
@@ -77,6 +90,13 @@ def add_arguments(parser: argparse.ArgumentParser | argparse._ArgumentGroup) -> 
         help="domain randomization of every episode, seeded by its seed: the default ranges "
         "(assets/randomization.toml; also `true`), `off`/`false`, or a .toml of your own",
     )
+    parser.add_argument(
+        "--camera-poses",
+        type=camera_poses_argument,
+        default=None,
+        metavar="FILE",
+        help="place the sim's cameras where your real ones stand: the file of `so101-camera-align estimate` (.toml)",
+    )
 
 
 def randomize_argument(text: str) -> str:
@@ -89,7 +109,12 @@ def servo_params_argument(text: str) -> str:
     return _argument(servo_params_spec, text)
 
 
-def _argument(normalize, text: str) -> str:
+def camera_poses_argument(text: str) -> str | None:
+    """argparse's `type` for --camera-poses."""
+    return _argument(camera_poses_spec, text)
+
+
+def _argument(normalize, text: str):
     try:
         return normalize(text)
     except (TypeError, ValueError) as error:

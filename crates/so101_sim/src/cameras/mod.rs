@@ -1,7 +1,8 @@
-//! Simulated cameras: which ones (spec), when (schedule), their pinhole model (intrinsics), and how
-//! frames are rendered off the physics thread (rig).
+//! Simulated cameras: which ones (spec), when (schedule), their pinhole model (intrinsics), where
+//! a user's real ones stand (placement), and how frames are rendered off the physics thread (rig).
 
 pub mod intrinsics;
+pub mod placement;
 pub mod rig;
 pub mod schedule;
 pub mod spec;

@@ -43,13 +43,14 @@ pub struct CameraSpec {
 pub struct CameraList(pub Vec<CameraRequest>);
 
 impl CameraList {
-    /// Every requested camera, with the defaults filled in where the entry named none.
-    pub fn resolve(&self, size: FrameSize, rate: f64) -> Vec<CameraSpec> {
+    /// Every requested camera, with the defaults filled in where the entry named none: `size`
+    /// gives each camera's default size by name.
+    pub fn resolve(&self, size: impl Fn(&str) -> FrameSize, rate: f64) -> Vec<CameraSpec> {
         self.0
             .iter()
             .map(|request| CameraSpec {
                 name: request.name.clone(),
-                size: request.size.unwrap_or(size),
+                size: request.size.unwrap_or_else(|| size(&request.name)),
                 rate: request.rate.unwrap_or(rate),
             })
             .collect()
@@ -135,7 +136,7 @@ mod tests {
     #[test]
     fn entries_take_defaults_unless_they_override_them() {
         let list = parse_camera_list("top, front:320x240 ,wrist@15,side:64x48@2.5").unwrap();
-        let specs = list.resolve(VGA, 30.0);
+        let specs = list.resolve(|_| VGA, 30.0);
         let summary: Vec<(&str, FrameSize, f64)> = specs
             .iter()
             .map(|spec| (spec.name.as_str(), spec.size, spec.rate))

@@ -170,6 +170,26 @@ impl Simulation {
         self.model_slice_mut(self.model().cam_fovy, ncam)[camera] = fovy;
     }
 
+    /// The body a camera is attached to (0: the world).
+    pub fn camera_body(&self, camera: usize) -> usize {
+        self.model_int(self.model().cam_bodyid, self.model().ncam, camera)
+    }
+
+    /// Puts a camera at `position` with `orientation` (w, x, y, z) in its body's frame, with a
+    /// vertical field of view of `fovy` degrees.
+    pub fn set_camera_frame(
+        &mut self,
+        camera: usize,
+        position: [f64; 3],
+        orientation: [f64; 4],
+        fovy: f64,
+    ) {
+        let ncam = self.model().ncam as usize;
+        self.model_slice_mut(self.model().cam_quat, 4 * ncam)[4 * camera..4 * camera + 4]
+            .copy_from_slice(&orientation);
+        self.set_camera_pose(camera, position, fovy);
+    }
+
     /// The joint-space inertia seen at a degree of freedom in the current pose (the mass matrix's
     /// diagonal, armature included), kg m².
     pub fn dof_inertia(&self, dof: usize) -> f64 {

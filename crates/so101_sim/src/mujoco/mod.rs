@@ -277,6 +277,15 @@ impl Simulation {
         rotation
     }
 
+    /// Orientation of a camera in the world as a row-major 3x3 rotation matrix (after a step or
+    /// forward): its columns are the camera's axes.
+    pub fn camera_rotation(&self, camera: usize) -> [f64; 9] {
+        let all = self.data_slice(self.data().cam_xmat, 9 * self.model().ncam as usize);
+        let mut rotation = [0.0; 9];
+        rotation.copy_from_slice(&all[9 * camera..9 * camera + 9]);
+        rotation
+    }
+
     /// Half extents of a box site (its `size`).
     pub fn site_size(&self, site: usize) -> [f64; 3] {
         let all = self.model_slice(self.model().site_size, 3 * self.model().nsite as usize);

@@ -1,7 +1,7 @@
 //! Puts a draw into the compiled model: colours, lights and cameras here; the cube's physics and
 //! the servos through the world, which owns what depends on them.
 
-use so101_core::contract::CAMERA_NAMES;
+use so101_core::contract::{CAMERAS_ON_THE_ARM, CAMERA_NAMES};
 
 use super::draw::EpisodeDraw;
 use crate::mujoco::{ObjectKind, Simulation};
@@ -10,8 +10,6 @@ use crate::mujoco::{ObjectKind, Simulation};
 const CUBE_MATERIAL: &str = "cube_mat";
 const TABLE_MATERIAL: &str = "table_mat";
 const BIN_MATERIAL: &str = "bin_mat";
-/// Cameras riding a link (their jitter is smaller): the wrist's.
-const CAMERAS_ON_THE_ARM: [&str; 1] = ["wrist"];
 
 /// The scene's elements a draw changes and their values as written, resolved once.
 #[derive(Debug, Clone)]

@@ -6,11 +6,39 @@ from __future__ import annotations
 import sys
 
 from .. import subcommands
-from . import camera_node, cameras, convert, driver, expert, latency, recorder, servo_model, sim, sim_core, storage, sysid
+from . import (
+    camera_align,
+    camera_node,
+    cameras,
+    convert,
+    driver,
+    expert,
+    latency,
+    recorder,
+    servo_model,
+    sim,
+    sim_core,
+    storage,
+    sysid,
+)
 
 BENCHMARKS = {
     module.__name__.rpartition(".")[2]: module.SUBCOMMAND
-    for module in (sim, sim_core, driver, recorder, cameras, camera_node, expert, convert, storage, latency, servo_model, sysid)
+    for module in (
+        sim,
+        sim_core,
+        driver,
+        recorder,
+        cameras,
+        camera_node,
+        camera_align,
+        expert,
+        convert,
+        storage,
+        latency,
+        servo_model,
+        sysid,
+    )
 }
 
 

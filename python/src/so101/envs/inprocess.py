@@ -6,8 +6,8 @@ trajectory for the same seed and actions (so101.envs.ros is the other one).
 Observations and actions: so101.envs.spaces. Reward: the task's (`dense_reward=True`:
 cube_to_bin's staged shaping); terminated when the task succeeds if the task's facts say so
 (contract.TASKS[task].terminates_on_success); truncated by max_episode_steps; info["is_success"].
-`randomize` (True, False, "default", "off" or a .toml file) and `servo_params` (a model's name or a
-fit file): as so101.sim_options reads them.
+`randomize` (True, False, "default", "off" or a .toml file), `servo_params` (a model's name or a
+fit file) and `camera_poses` (so101-camera-align's file): as so101.sim_options reads them.
 
 So101VectorEnv steps N worlds in one native call across threads (a gymnasium VectorEnv with
 next-step autoreset), not N processes: what `gym.make_vec(id, num_envs=N)` gives.
@@ -25,7 +25,7 @@ from gymnasium.vector.utils import batch_space
 
 from .. import contract
 from ..paths import asset
-from ..sim_options import DEFAULT_SERVO_MODEL, randomize_spec, servo_params_spec
+from ..sim_options import DEFAULT_SERVO_MODEL, camera_poses_spec, randomize_spec, servo_params_spec
 from .spaces import STATE, action_space, checked_action, observation_from_state, observation_space, task_facts
 
 
@@ -52,6 +52,7 @@ class So101InProcessEnv(gym.Env):
         scene: str | None = None,
         servo_params: str | os.PathLike = DEFAULT_SERVO_MODEL,
         randomize: bool | str | os.PathLike = False,
+        camera_poses: str | os.PathLike | None = None,
     ):
         import so101_native
 
@@ -70,6 +71,7 @@ class So101InProcessEnv(gym.Env):
             dense_reward=dense_reward,
             servo_params=servo_params_spec(servo_params),
             randomize=randomize_spec(randomize),
+            camera_poses=camera_poses_spec(camera_poses),
         )
         rendered = dict(self._cameras)
         if render_mode == "rgb_array":
@@ -134,6 +136,7 @@ class So101VectorEnv(VectorEnv):
         scene: str | None = None,
         servo_params: str | os.PathLike = DEFAULT_SERVO_MODEL,
         randomize: bool | str | os.PathLike = False,
+        camera_poses: str | os.PathLike | None = None,
         **_ignored,
     ):
         import so101_native
@@ -154,6 +157,7 @@ class So101VectorEnv(VectorEnv):
             threads=threads,
             servo_params=servo_params_spec(servo_params),
             randomize=randomize_spec(randomize),
+            camera_poses=camera_poses_spec(camera_poses),
         )
         if self._cameras:
             self._batch.enable_cameras(list(self._cameras.items()), renderer=renderer)

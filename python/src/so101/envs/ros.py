@@ -29,7 +29,7 @@ import numpy as np
 from .. import contract
 from ..messages import joint_positions, rgb_image
 from ..paths import node_binary, node_environment
-from ..sim_options import DEFAULT_SERVO_MODEL, randomize_spec, servo_params_spec
+from ..sim_options import DEFAULT_SERVO_MODEL, camera_poses_spec, randomize_spec, servo_params_spec
 from ..stack import process
 from ..units import JOINT_NAMES
 from .spaces import action_space, checked_action, observation_from_state, observation_space, task_facts
@@ -57,10 +57,12 @@ class So101RosEnv(gym.Env):
         dense_reward: bool = False,
         servo_params: str | os.PathLike = DEFAULT_SERVO_MODEL,
         randomize: bool | str | os.PathLike = False,
+        camera_poses: str | os.PathLike | None = None,
     ):
         # An unknown task or option is refused before anything starts.
         facts = task_facts(task)
         servo_params, randomize = servo_params_spec(servo_params), randomize_spec(randomize)
+        self._camera_poses = camera_poses_spec(camera_poses)
         import rclpy
         from geometry_msgs.msg import PoseStamped
         from rclpy.experimental import EventsExecutor
@@ -196,6 +198,8 @@ class So101RosEnv(gym.Env):
         ]
         if self._lite:
             command.append("--lite")
+        if self._camera_poses is not None:
+            command += ["--camera-poses", self._camera_poses]
         if self._dense_reward:
             command.append("--dense-reward")
         self._process = process.start(command, env=node_environment(), stdout=self._log, stderr=self._log)

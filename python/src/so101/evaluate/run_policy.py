@@ -230,6 +230,7 @@ def evaluate(args, policy: StackPolicy) -> int:
             dense_reward=args.reward == "dense",
             servo_params=args.servo_params,
             randomize=args.randomize,
+            camera_poses=args.camera_poses,
         )
         try:
             results += run_episodes(
@@ -255,6 +256,7 @@ def evaluate(args, policy: StackPolicy) -> int:
         episode_time_s=args.episode_time,
         servo_params=args.servo_params,
         randomize=args.randomize,
+        camera_poses=args.camera_poses,
     )
     write_report(Path(args.output), summary, results)
     return 0

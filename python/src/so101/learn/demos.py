@@ -75,7 +75,8 @@ def launch_command(args, output: Path) -> list[str]:
         f"--speed={speed:g}",
         f"--sim-args=--cameras {shlex.quote(args.cameras)}"
         + (" --lite" if args.lite else "")
-        + f" --servo-params {shlex.quote(args.servo_params)} --randomize {shlex.quote(args.randomize)}",
+        + f" --servo-params {shlex.quote(args.servo_params)} --randomize {shlex.quote(args.randomize)}"
+        + (f" --camera-poses {shlex.quote(args.camera_poses)}" if args.camera_poses else ""),
         f"--teleop-args={teleop}",
     ]
 

@@ -60,6 +60,7 @@ class So101LeRobotEnv(gym.Env):
         backend: str = "inprocess",
         servo_params: str | os.PathLike = DEFAULT_SERVO_MODEL,
         randomize: bool | str | os.PathLike = False,
+        camera_poses: str | os.PathLike | None = None,
     ):
         self._cameras = {name: tuple(size) for name, size in (cameras or {}).items()}
         self._environment_state = environment_state
@@ -74,6 +75,7 @@ class So101LeRobotEnv(gym.Env):
             cameras=sim_cameras,
             servo_params=servo_params,
             randomize=randomize,
+            camera_poses=camera_poses,
         )
         self.metadata = {**self.metadata, "render_fps": fps}
         self.render_mode = render_mode

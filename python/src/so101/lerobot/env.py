@@ -20,7 +20,7 @@ from lerobot.envs.configs import EnvConfig
 from lerobot.utils.constants import ACTION, OBS_ENV_STATE, OBS_IMAGES, OBS_STATE
 
 from .. import contract
-from ..sim_options import DEFAULT_SERVO_MODEL, randomize_spec, servo_params_spec
+from ..sim_options import DEFAULT_SERVO_MODEL, camera_poses_spec, randomize_spec, servo_params_spec
 
 PACKAGE = "lerobot_env_so101_sim"
 ENVIRONMENT_STATE_SIZE = 7  # cube position (x y z, m) and orientation (w x y z), world frame
@@ -78,6 +78,8 @@ class So101SimEnvConfig(EnvConfig):
     servo_params: str = DEFAULT_SERVO_MODEL  # the sim's servo model: sts3215, gain80 or a so101-sysid fit file
     # Domain randomization: true or default (assets/randomization.toml), false or off, or a .toml.
     randomize: str = "off"
+    # Where your real cameras stand: so101-camera-align's file (.toml); empty: the scene's cameras.
+    camera_poses: str | None = None
 
     def __post_init__(self):
         if self.backend not in ("inprocess", "ros"):
@@ -91,6 +93,7 @@ class So101SimEnvConfig(EnvConfig):
         # `--env.randomize=true` arrives as a string; one spelling from here on (so101.sim_options).
         self.servo_params = servo_params_spec(self.servo_params)
         self.randomize = randomize_spec(self.randomize)
+        self.camera_poses = camera_poses_spec(self.camera_poses)
         self.features, self.features_map = features_of(self.cameras, self.environment_state)
 
     @property
@@ -114,6 +117,7 @@ class So101SimEnvConfig(EnvConfig):
             "backend": self.backend,
             "servo_params": self.servo_params,
             "randomize": self.randomize,
+            "camera_poses": self.camera_poses,
         }
         if self.episode_length:
             kwargs["max_episode_steps"] = int(self.episode_length)
