@@ -45,10 +45,11 @@ def world_camera(name: str) -> tuple[np.ndarray, np.ndarray]:
     return position, np.column_stack([x, y, np.cross(x, y)])
 
 
-def project(point: np.ndarray, camera: str, info) -> tuple[float, float]:
-    """Pixel of a world point, through the camera pose of the scene file and the node's CameraInfo
-    (MuJoCo cameras look along -z with y up; the optical frame has z forward and y down)."""
-    position, rotation = world_camera(camera)
+def project(point: np.ndarray, camera: str, info, pose: tuple[np.ndarray, np.ndarray] | None = None) -> tuple[float, float]:
+    """Pixel of a world point, through the camera pose of the scene file (or `pose`: position and
+    rotation in the world) and the node's CameraInfo (MuJoCo cameras look along -z with y up; the
+    optical frame has z forward and y down)."""
+    position, rotation = pose if pose is not None else world_camera(camera)
     local = rotation.T @ (point - position)
     x, y, z = local[0], -local[1], -local[2]
     k = info.k
@@ -107,6 +108,46 @@ def step(ros, sim, times: int = 1):
         future = client.call_async(Trigger.Request())
         wait_until(future.done, 10.0, "the response of /sim/step", sim)
         assert future.result().success, future.result().message
+
+
+def test_a_camera_placed_by_a_file_renders_from_there_with_its_size_and_field_of_view(sim_factory, ros, tmp_path):
+    """--camera-poses (so101-camera-align's file): the top camera moved 6 cm and turned 5 degrees
+    renders the cube where that pose projects it, at the file's size and field of view."""
+    import cv2
+    from geometry_msgs.msg import PoseStamped
+
+    from so101.cameras.placement import Placement, quaternion_from_matrix, write_placements
+    from so101.cameras.sim_board import scene_cameras
+
+    position, rotation, _fovy = scene_cameras(SCENE)["top"]
+    world_position, world_rotation = world_camera("top")
+    # The base frame is the world's, shifted: the same rotation, so the placement's world pose is known.
+    np.testing.assert_allclose(rotation, world_rotation, atol=1e-12)
+    turn, _ = cv2.Rodrigues(np.array([0.0, 1.0, 0.0]) * math.radians(5.0))
+    shift = np.array([0.04, -0.03, -0.03])
+    poses_file = tmp_path / "camera_poses.toml"
+    write_placements(poses_file, {"top": Placement(position + shift, quaternion_from_matrix(turn @ rotation), 44.0, 320, 240)})
+
+    sim = sim_factory("--lockstep", "--seed", "4", "--cameras", "top", "--camera-rate", "100", "--camera-poses", str(poses_file))
+    images, infos = subscribe_camera(ros, sim, "top")
+    poses = ros.subscribe(sim.name("cube/pose"), PoseStamped, reliable_qos(100))
+    ros.wait_for_graph(
+        lambda: ros.node.count_publishers(sim.name("camera/top/image_raw")) >= 1, 30.0, "the camera publisher", sim
+    )
+    step(ros, sim, 3)
+    wait_until(lambda: images.count() >= 3, 10.0, "frames of the first steps", sim)
+    image = images.latest()
+    stamp = stamp_seconds(image.header.stamp)
+    wait_until(lambda: any(stamp_seconds(m.header.stamp) == stamp for m in infos.messages()), 10.0, "its camera_info", sim)
+    info = next(m for m in infos.messages() if stamp_seconds(m.header.stamp) == stamp)
+    pose = next(m for m in poses.messages() if stamp_seconds(m.header.stamp) == stamp)
+    assert (image.width, image.height, info.width, info.height) == (320, 240, 320, 240)
+    assert info.k[4] == pytest.approx(0.5 * 240 / math.tan(math.radians(44.0) / 2), rel=1e-6)
+    u, v, _count = red_centroid(image_array(image))
+    expected = project(cube_position(pose), "top", info, (world_position + shift, turn @ world_rotation))
+    unplaced = project(cube_position(pose), "top", info)
+    assert math.dist((u, v), expected) < 2.5, ((u, v), expected)
+    assert math.dist((u, v), unplaced) > 10, "the placement did not move the camera"
 
 
 # =========================================================================== rate and content

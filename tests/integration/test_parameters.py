@@ -30,6 +30,7 @@ SIM_PARAMETERS = {
     "camera_shadows",
     "servo_params",
     "randomize",
+    "camera_poses",
     "joints.names",
     "joints.min_positions",
     "joints.max_positions",
@@ -42,7 +43,7 @@ def test_sim_parameters_list_get_describe(sim_factory, ros):
     assert set(peer.names()) == SIM_PARAMETERS
     assert_documented(peer, NODE_NAME)
     rate, seed, task, names = peer.get("rate", "seed", "task", "joints.names")
-    assert peer.get("servo_params", "randomize") == ["sts3215", "off"]
+    assert peer.get("servo_params", "randomize", "camera_poses") == ["sts3215", "off", ""]
     assert (rate, seed, task) == (50.0, 7, "cube_to_bin")
     assert names[0] == "shoulder_pan" and len(names) == 6
     assert peer.types("rate", "lite", "cameras") == [
