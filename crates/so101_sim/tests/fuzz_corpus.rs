@@ -10,3 +10,11 @@ fn the_randomization_toml_corpus_replays() {
         so101_sim::randomization::fuzzing::randomization_toml,
     );
 }
+
+#[test]
+fn the_camera_poses_toml_corpus_replays() {
+    replay_corpus(
+        "camera_poses_toml",
+        so101_sim::cameras::fuzzing::camera_poses_toml,
+    );
+}

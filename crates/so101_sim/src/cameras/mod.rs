@@ -1,6 +1,7 @@
 //! Simulated cameras: which ones (spec), when (schedule), their pinhole model (intrinsics), where
 //! a user's real ones stand (placement), and how frames are rendered off the physics thread (rig).
 
+pub mod fuzzing;
 pub mod intrinsics;
 pub mod placement;
 pub mod rig;
