@@ -18,6 +18,7 @@ No DDS here, but the directory's conftest wants the private network namespace al
 
 from __future__ import annotations
 
+import gc
 import time
 
 import pytest
@@ -29,6 +30,22 @@ from harness import JOINT_NAMES
 HOMING_OFFSET, PROTECTION_TIME, TORQUE_ENABLE, GOAL_POSITION = 31, 35, 40, 42
 PRESENT_POSITION, PRESENT_LOAD, PRESENT_CURRENT = 56, 60, 69
 OVERLOAD = 0x20
+
+
+@pytest.fixture(autouse=True)
+def no_collector_pauses():
+    """The SDK and LeRobot's bus time a status packet on the client's clock: about 34 ms for a read
+    at 1 Mbaud, checked after each non-blocking read. In a pytest worker the suite has filled
+    (torch and LeRobot imported), one automatic full collection of Python's cyclic garbage
+    collector stops the process for about 200 ms; landing between a read and that check, it reads
+    as a servo that never answered ("There is no status packet!", seen in full-suite runs, never
+    alone). The collector runs before each test and waits until it is over."""
+    gc.collect()
+    gc.disable()
+    try:
+        yield
+    finally:
+        gc.enable()
 
 
 @pytest.fixture
