@@ -16,13 +16,14 @@ from so101.cameras import cli
 from so101.cameras.board import LAYOUTS, Board
 from so101.cameras.placement import (
     Placement,
+    corners_by_point,
     find_corners,
     matrix_from_quaternion,
     quaternion_from_matrix,
     read_placements,
     write_placements,
 )
-from so101.cameras.sim_board import picture, scene_cameras, scene_with_board
+from so101.cameras.sim_board import ideal_calibration, picture, scene_cameras, scene_with_board
 from so101.envs.inprocess import default_scene
 
 SIZE = (480, 640)  # height, width
@@ -53,15 +54,14 @@ UNTOLD = {
 def calibration_file(path, fovy: float) -> str:
     """What camera_calibration would write for the sim's ideal pinhole (square pixels, centred)."""
     height, width = SIZE
-    f = 0.5 * height / math.tan(math.radians(fovy) / 2)
-    k = [f, 0, (width - 1) / 2, 0, f, (height - 1) / 2, 0, 0, 1]
+    k = ideal_calibration(fovy, width, height).camera_matrix
     path.write_text(
         yaml.safe_dump(
             {
                 "image_width": width,
                 "image_height": height,
                 "camera_name": "sim",
-                "camera_matrix": {"rows": 3, "cols": 3, "data": k},
+                "camera_matrix": {"rows": 3, "cols": 3, "data": k.ravel().tolist()},
                 "distortion_model": "plumb_bob",
                 "distortion_coefficients": {"rows": 1, "cols": 5, "data": [0.0] * 5},
             }
@@ -72,11 +72,6 @@ def calibration_file(path, fovy: float) -> str:
 
 def render(scene, poses_file, camera: str) -> np.ndarray:
     return picture(scene, poses_file, camera, SIZE)
-
-
-def corners_by_point(image_rgb: np.ndarray) -> dict[tuple, np.ndarray]:
-    objects, pixels = find_corners(cv2.cvtColor(image_rgb, cv2.COLOR_RGB2BGR), Board())
-    return {tuple(np.round(o, 6)): p for o, p in zip(objects, pixels)}
 
 
 @pytest.mark.parametrize("camera", list(UNTOLD))
@@ -102,8 +97,8 @@ def test_a_sim_camera_is_placed_back_where_it_rendered_the_board(camera, tmp_pat
     assert abs(placed.fovy - truth.fovy) < 1e-9 and (placed.width, placed.height) == (640, 480)
 
     # Rendered again from where the command put it, the board's corners fall where they were.
-    again = corners_by_point(render(scene, str(found), camera))
-    before = corners_by_point(original)
+    again = corners_by_point(cv2.cvtColor(render(scene, str(found), camera), cv2.COLOR_RGB2BGR), Board())
+    before = corners_by_point(cv2.cvtColor(original, cv2.COLOR_RGB2BGR), Board())
     common = before.keys() & again.keys()
     assert len(common) >= 12, len(common)
     rms = math.sqrt(np.mean([np.sum((again[k] - before[k]) ** 2) for k in common]))

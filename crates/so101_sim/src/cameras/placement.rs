@@ -9,7 +9,7 @@ use nalgebra::{Quaternion, UnitQuaternion, Vector3};
 use serde::Deserialize;
 use so101_core::kinematics::BASE_LINK;
 
-use super::spec::{FrameSize, MAX_SIDE};
+use super::spec::{is_camera_name, FrameSize, MAX_SIDE};
 use crate::mujoco::{ObjectKind, Simulation};
 
 /// Farthest a camera may sit from the arm's base (m): beyond it a file is a mistake (millimetres
@@ -43,9 +43,7 @@ impl CameraPlacement {
     }
 
     fn check(&self, name: &str) -> Result<(), String> {
-        let valid_name =
-            !name.is_empty() && name.chars().all(|c| c.is_ascii_alphanumeric() || c == '_');
-        if !valid_name {
+        if !is_camera_name(name) {
             return Err(format!(
                 "[{name}]: a camera name is letters, digits and '_'"
             ));

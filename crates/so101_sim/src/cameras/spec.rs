@@ -83,9 +83,7 @@ fn parse_request(entry: &str) -> Result<CameraRequest, String> {
         Some((name, size)) => (name, Some(parse_size(size)?)),
         None => (rest, None),
     };
-    let valid_name =
-        !name.is_empty() && name.chars().all(|c| c.is_ascii_alphanumeric() || c == '_');
-    if !valid_name {
+    if !is_camera_name(name) {
         return Err(format!(
             "{entry:?}: a camera entry is NAME[:WIDTHxHEIGHT][@RATE], NAME in letters, digits and '_'"
         ));
@@ -95,6 +93,11 @@ fn parse_request(entry: &str) -> Result<CameraRequest, String> {
         size,
         rate,
     })
+}
+
+/// A camera's name as the node takes it: letters, digits and '_' (it becomes part of topic names).
+pub fn is_camera_name(name: &str) -> bool {
+    !name.is_empty() && name.chars().all(|c| c.is_ascii_alphanumeric() || c == '_')
 }
 
 /// Parses `WIDTHxHEIGHT`.

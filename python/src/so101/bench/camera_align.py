@@ -24,8 +24,8 @@ from ..cameras.board import Board
 from ..cameras.placement import (
     AlignError,
     Placement,
+    corners_by_point,
     estimate,
-    find_corners,
     matrix_from_quaternion,
     quaternion_from_matrix,
     write_placements,
@@ -53,7 +53,7 @@ def random_pose(rng: np.random.Generator, position, rotation, fovy) -> Placement
 
 def overlay_px(original: np.ndarray, again: np.ndarray, board: Board) -> float:
     """RMS distance (px) between the board corners both frames show."""
-    before, after = ({tuple(np.round(o, 6)): p for o, p in zip(*find_corners(image, board))} for image in (original, again))
+    before, after = corners_by_point(original, board), corners_by_point(again, board)
     common = before.keys() & after.keys()
     return math.sqrt(np.mean([np.sum((after[k] - before[k]) ** 2) for k in common]))
 

@@ -91,6 +91,13 @@ def find_corners(image: np.ndarray, board: Board) -> tuple[np.ndarray, np.ndarra
     return object_points.reshape(-1, 3), image_points.reshape(-1, 2)
 
 
+def corners_by_point(image: np.ndarray, board: Board) -> dict[tuple, np.ndarray]:
+    """The board's corners found in `image`, each pixel keyed by its point on the board (m): two
+    pictures of the board compare corner by corner."""
+    objects, pixels = find_corners(image, board)
+    return {tuple(np.round(point, 6)): pixel for point, pixel in zip(objects, pixels)}
+
+
 def estimate(image: np.ndarray, calibration: Calibration, board: Board) -> Placement:
     """The camera's placement from one picture of the board laid as documented."""
     if image.shape[:2] != (calibration.height, calibration.width):
