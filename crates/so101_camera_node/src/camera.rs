@@ -340,7 +340,7 @@ impl Camera {
                 rgb.map(|rgb| (jpeg.to_vec(), rgb))
             }
             PixelFormat::Yuyv => {
-                let rgb = rgb_from_yuyv(&frame.data);
+                let rgb = rgb_from_yuyv(&frame.data, frame.yuv_range);
                 jpeg_from_rgb(&rgb, frame.width, frame.height, self.jpeg_quality)
                     .map(|jpeg| (jpeg, Some(rgb)))
             }

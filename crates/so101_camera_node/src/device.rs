@@ -6,6 +6,7 @@ use std::time::Duration;
 
 use crate::{
     controls::{ControlKind, ControlState, Setting},
+    decode::YuvRange,
     modes::{Mode, OfferedMode, PixelFormat},
 };
 
@@ -15,6 +16,8 @@ pub struct Frame {
     /// The buffer's bytes: a JPEG (MJPEG) or packed YUYV.
     pub data: Vec<u8>,
     pub format: PixelFormat,
+    /// How a YUYV frame's samples span their bytes, as the driver says (MJPEG: unused).
+    pub yuv_range: YuvRange,
     pub width: u32,
     pub height: u32,
     /// When its capture began, on CLOCK_MONOTONIC.

@@ -26,6 +26,7 @@ use std::{
 
 use crate::{
     controls::{ControlKind, ControlState, Setting},
+    decode::YuvRange,
     device::{monotonic_now, CameraDevice, CameraStream, CaptureError, Frame, OpenError},
     modes::{Mode, OfferedMode, PixelFormat, DEFAULT_FPS, DEFAULT_SIZE},
 };
@@ -145,18 +146,22 @@ pub fn texture(rgb: &mut [u8]) {
     }
 }
 
-/// rgb8 as packed YUYV 4:2:2 (BT.601, full range), chroma from each pixel pair's mean.
+/// rgb8 as packed YUYV 4:2:2 (BT.601, limited range as USB cameras send it), chroma from each
+/// pixel pair's mean.
 pub fn yuyv_from_rgb(rgb: &[u8]) -> Vec<u8> {
-    let luma =
-        |p: &[u8]| 0.299 * f64::from(p[0]) + 0.587 * f64::from(p[1]) + 0.114 * f64::from(p[2]);
+    let luma = |p: &[u8]| {
+        16.0 + (0.299 * f64::from(p[0]) + 0.587 * f64::from(p[1]) + 0.114 * f64::from(p[2])) * 219.0
+            / 255.0
+    };
     let byte = |value: f64| value.round().clamp(0.0, 255.0) as u8;
     let mut out = Vec::with_capacity(rgb.len() / 3 * 2);
     for pair in rgb.chunks_exact(6) {
         let (a, b) = pair.split_at(3);
         let mean = |i: usize| (f64::from(a[i]) + f64::from(b[i])) / 2.0;
         let (r, g, bl) = (mean(0), mean(1), mean(2));
-        let u = -0.168_736 * r - 0.331_264 * g + 0.5 * bl + 128.0;
-        let v = 0.5 * r - 0.418_688 * g - 0.081_312 * bl + 128.0;
+        let chroma = 224.0 / 255.0;
+        let u = (-0.168_736 * r - 0.331_264 * g + 0.5 * bl) * chroma + 128.0;
+        let v = (0.5 * r - 0.418_688 * g - 0.081_312 * bl) * chroma + 128.0;
         out.extend([byte(luma(a)), byte(u), byte(luma(b)), byte(v)]);
     }
     out
@@ -292,6 +297,7 @@ impl FakeStream {
         Frame {
             data,
             format: self.mode.format,
+            yuv_range: YuvRange::Limited,
             width: self.mode.width,
             height: self.mode.height,
             captured,
@@ -440,10 +446,10 @@ mod tests {
         assert_eq!(frame.format, PixelFormat::Yuyv);
         assert_eq!(frame.data, yuyv_from_rgb(&picture(8, 2, 0)));
         assert_eq!(frame.data.len(), 8 * 2 * 2);
-        // Grey stays grey: no chroma.
+        // Grey stays grey (no chroma), its luma in limited range: 16 + 90 * 219 / 255.
         assert_eq!(
             yuyv_from_rgb(&[90, 90, 90, 90, 90, 90]),
-            vec![90, 128, 90, 128]
+            vec![93, 128, 93, 128]
         );
     }
 

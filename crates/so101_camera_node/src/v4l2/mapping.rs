@@ -6,13 +6,24 @@ use std::time::Duration;
 
 use v4l::{
     buffer::Flags,
+    format::{Colorspace, Quantization},
     fraction::Fraction,
     frameinterval::{FrameInterval, FrameIntervalEnum},
     framesize::{FrameSize, FrameSizeEnum},
     timestamp::Timestamp,
 };
 
-use crate::modes::DEFAULT_SIZE;
+use crate::{decode::YuvRange, modes::DEFAULT_SIZE};
+
+/// The range of a YUYV format's samples: what the driver says, or for "default" what the V4L2
+/// specification defines (V4L2_MAP_QUANTIZATION_DEFAULT): full for the JPEG colorspace, limited
+/// for every other Y'CbCr one. UVC cameras and vivid say "default" and send limited range.
+pub fn yuv_range(quantization: Quantization, colorspace: Colorspace) -> YuvRange {
+    match (quantization, colorspace) {
+        (Quantization::FullRange, _) | (Quantization::Default, Colorspace::JPEG) => YuvRange::Full,
+        _ => YuvRange::Limited,
+    }
+}
 
 /// The sizes a format offers. A stepwise range (cameras that scale freely) offers its largest
 /// size and the default size where the range holds it, rather than every step of it.
@@ -122,6 +133,19 @@ mod tests {
     };
 
     use super::*;
+
+    #[test]
+    fn yuyv_is_limited_range_unless_the_driver_says_full_or_jpeg() {
+        use Colorspace::{Rec709, JPEG, SMPTE170M, SRGB};
+        use Quantization::{Default, FullRange, LimitedRange};
+        for colorspace in [SRGB, SMPTE170M, Rec709] {
+            assert_eq!(yuv_range(Default, colorspace), YuvRange::Limited);
+            assert_eq!(yuv_range(LimitedRange, colorspace), YuvRange::Limited);
+            assert_eq!(yuv_range(FullRange, colorspace), YuvRange::Full);
+        }
+        assert_eq!(yuv_range(Default, JPEG), YuvRange::Full);
+        assert_eq!(yuv_range(LimitedRange, JPEG), YuvRange::Limited);
+    }
 
     fn discrete_size(width: u32, height: u32) -> FrameSize {
         FrameSize {

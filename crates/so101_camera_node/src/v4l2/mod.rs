@@ -25,6 +25,7 @@ use v4l::{
 
 use crate::{
     controls::{self, ControlKind, ControlState, Setting},
+    decode::YuvRange,
     device::{monotonic_now, CameraDevice, CameraStream, CaptureError, Frame, OpenError},
     modes::{Mode, OfferedMode, PixelFormat},
 };
@@ -119,6 +120,7 @@ impl CameraDevice for V4l2Camera {
             path: self.path.clone(),
             mode,
             stride: format.stride as usize,
+            yuv_range: mapping::yuv_range(format.quantization, format.colorspace),
             stream: Some(stream),
             device,
         }))
@@ -130,6 +132,7 @@ struct V4l2Stream {
     mode: Mode,
     /// Bytes per row as the driver lays YUYV frames out (at least width * 2).
     stride: usize,
+    yuv_range: YuvRange,
     /// Dropped before the device (it stops streaming on drop).
     stream: Option<MmapStream<'static>>,
     device: Device,
@@ -168,6 +171,7 @@ impl CameraStream for V4l2Stream {
         Ok(Frame {
             data,
             format: self.mode.format,
+            yuv_range: self.yuv_range,
             width: self.mode.width,
             height: self.mode.height,
             captured: mapping::capture_instant(metadata.flags, metadata.timestamp, monotonic_now()),
