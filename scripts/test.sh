@@ -25,7 +25,7 @@ cargo fmt --all -- --check
 log "ruff (python/, tests/) and shellcheck (scripts/)"
 .venv/bin/ruff check python tests
 .venv/bin/ruff format --check python tests
-shellcheck scripts/*.sh scripts/isolated
+shellcheck scripts/*.sh scripts/vm/*.sh scripts/isolated .ci/run
 log "cargo clippy"
 cargo clippy --release --locked --workspace --all-targets -- -D warnings
 
