@@ -42,6 +42,11 @@ pub struct Args {
     /// machine with their stable names, and exit.
     #[arg(long)]
     pub list: bool,
+    /// Save one still of each --camera as DIR/NAME/<seconds since 1970>.jpg, taken after 1.5 s
+    /// of streaming (automatic exposure settles) in the node's mode and controls, and exit: the
+    /// empty workspace the sim shows behind the arm (randomization `backgrounds = DIR`).
+    #[arg(long, value_name = "DIR")]
+    pub snapshot: Option<PathBuf>,
     /// Exit cleanly after this many seconds.
     #[arg(long)]
     pub duration: Option<f64>,

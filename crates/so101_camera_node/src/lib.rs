@@ -10,6 +10,8 @@
 //! - [`calibration`]: camera_info from a camera_calibration YAML file;
 //! - [`fuzzing`]: the fuzz targets' bodies over the calibration YAML, the request and the JPEG check;
 //!
+//! - [`snapshot`]: `--snapshot`, a still of each camera's empty workspace for the sim's backgrounds;
+//!
 //! The devices: [`v4l2`] (USB cameras through the `v4l` crate; [`v4l2::mapping`] and
 //! [`v4l2::discovery`] are its pure parts). The node: [`node`] (start, parameters, diagnostics)
 //! and [`camera`] (one camera's thread); [`messages`], [`status`] and [`decode`] serve them.
@@ -28,5 +30,6 @@ pub mod messages;
 pub mod modes;
 pub mod node;
 pub mod request;
+pub mod snapshot;
 pub mod status;
 pub mod v4l2;

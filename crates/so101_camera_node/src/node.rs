@@ -36,6 +36,7 @@ use crate::{
     fake::FakeCamera,
     modes,
     request::{CameraRequest, DeviceName},
+    snapshot,
     status::{diagnostic, summary, CameraStatus},
     v4l2::{discovery, V4l2Camera},
 };
@@ -187,6 +188,15 @@ pub fn run(args: Args) -> Result<()> {
         let controls = stream.controls();
         tracing::info!(camera = %request.name, device = %request.device, %mode, calibrated = calibration.is_some(), "camera open");
         opened.push((mode, stream, calibration, camera_settings, controls));
+    }
+    if let Some(dir) = &args.snapshot {
+        for (request, (_, stream, ..)) in args.cameras.iter().zip(&mut opened) {
+            let jpeg = snapshot::take(stream.as_mut(), snapshot::SETTLE, args.jpeg_quality)
+                .with_context(|| format!("--camera {}: no still", request.name))?;
+            let path = snapshot::save(dir, &request.name, &jpeg, std::time::SystemTime::now())?;
+            println!("{}: {}", request.name, path.display());
+        }
+        return Ok(());
     }
     let mut node = RosNode::start("so101_camera_node", &args.node)?;
     // ros2-client's spinner keeps the counts of matched subscribers (image_raw is decoded only
@@ -373,11 +383,11 @@ mod tests {
         let mode = modes::choose(&fake.modes().unwrap(), None, None).unwrap();
         let controls = fake.open(mode).unwrap().controls();
         let parameters = declarations(&args, &[("top", &controls)]);
-        // Listing, waiting, a run's length and start controls (each its own parameter) are no
-        // settings of the node.
+        // Listing, waiting, stills, a run's length and start controls (each its own parameter)
+        // are no settings of the node.
         assert_eq!(
             Options::of::<Args>().undeclared(&parameters),
-            ["control", "wait", "list", "duration"]
+            ["control", "wait", "list", "snapshot", "duration"]
         );
         assert_documented("so101_camera_node", &parameters);
     }

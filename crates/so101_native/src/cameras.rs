@@ -72,6 +72,7 @@ impl CameraSet {
             show_collision_geoms: true,
             shadows,
             wait_for_renderer: true,
+            backgrounds: env.backgrounds().map(ToOwned::to_owned),
         };
         let (mailbox, frames) = mpsc::sync_channel(1);
         let rig = CameraRig::start(
@@ -113,9 +114,10 @@ impl CameraSet {
     pub fn request(&mut self, env: &mut TaskEnv) -> PyResult<()> {
         let time = env.world().time();
         self.rig.restart(time);
+        let background = env.background_draw();
         match self
             .rig
-            .capture_and_wait(env.world_mut().simulation_mut(), time)
+            .capture_and_wait(env.world_mut().simulation_mut(), time, background)
         {
             Capture::Queued(_) => Ok(()),
             Capture::Nothing | Capture::Skipped => {

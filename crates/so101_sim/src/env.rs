@@ -146,6 +146,16 @@ impl TaskEnv {
         self.randomized.as_ref().and_then(|r| r.draw.as_ref())
     }
 
+    /// The folder of real backgrounds the randomization draws from, if any.
+    pub fn backgrounds(&self) -> Option<&std::path::Path> {
+        self.randomization()?.scene.backgrounds.as_deref()
+    }
+
+    /// The current episode's draw of real backgrounds (the camera rig's `background`).
+    pub fn background_draw(&self) -> Option<u64> {
+        self.draw()?.background
+    }
+
     /// The randomization ranges in use, if any.
     pub fn randomization(&self) -> Option<&RandomizationConfig> {
         self.randomized.as_ref().map(|r| &r.randomizer.config)

@@ -10,7 +10,22 @@ use quick_xml::{
     Reader, Writer,
 };
 
-use crate::mujoco::Simulation;
+use crate::mujoco::{ObjectKind, Simulation};
+
+/// Bodies whose geoms are the workspace a real background replaces: the world's own (the floor)
+/// and the table. The arm, the cube and the bin stay in front of it.
+pub const BACKGROUND_BODIES: [&str; 2] = ["world", "table"];
+
+/// By geom id: whether the geom belongs to [`BACKGROUND_BODIES`].
+pub fn background_geoms(sim: &Simulation) -> Vec<bool> {
+    let bodies: Vec<usize> = BACKGROUND_BODIES
+        .iter()
+        .filter_map(|name| sim.id(ObjectKind::Body, name))
+        .collect();
+    (0..sim.geom_count())
+        .map(|geom| bodies.contains(&sim.geom_body(geom)))
+        .collect()
+}
 
 #[derive(Debug, thiserror::Error)]
 pub enum SceneError {

@@ -146,6 +146,7 @@ fn start_cameras(
         shadows: args.camera_shadows,
         // Only real time may skip frames; every other mode renders each at its sim-time instant.
         wait_for_renderer: time_mode != TimeMode::Scaled { speed: 1.0 },
+        backgrounds: env.backgrounds().map(ToOwned::to_owned),
     };
     let rig = CameraRig::start(sim, specs, options, env.world().time(), move |batches| {
         publish_batches(&topics, jpeg_quality, &batches)
@@ -463,8 +464,14 @@ impl SimLoop {
     fn capture_frames(&mut self, notify: bool) -> Option<std::sync::mpsc::Receiver<()>> {
         let rig = self.cameras.as_mut()?;
         let time = self.env.world().time();
-        rig.capture(self.env.world_mut().simulation_mut(), time, notify)
-            .published()
+        let background = self.env.background_draw();
+        rig.capture(
+            self.env.world_mut().simulation_mut(),
+            time,
+            background,
+            notify,
+        )
+        .published()
     }
 
     /// Hands the frames due now (every camera's, after a start or reset) to the renderer, waiting
@@ -472,7 +479,8 @@ impl SimLoop {
     fn capture_every_frame(&mut self) -> Option<std::sync::mpsc::Receiver<()>> {
         let rig = self.cameras.as_mut()?;
         let time = self.env.world().time();
-        rig.capture_and_wait(self.env.world_mut().simulation_mut(), time)
+        let background = self.env.background_draw();
+        rig.capture_and_wait(self.env.world_mut().simulation_mut(), time, background)
             .published()
     }
 

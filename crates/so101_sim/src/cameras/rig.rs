@@ -8,6 +8,7 @@
 //! instant.
 
 use std::{
+    path::PathBuf,
     sync::{
         mpsc::{self, Receiver, SyncSender},
         Arc, Mutex,
@@ -17,14 +18,21 @@ use std::{
 };
 
 use anyhow::{bail, Context, Result};
+use so101_core::contract::CAMERAS_ON_THE_ARM;
 
-use super::{intrinsics::Intrinsics, schedule::FrameClock, spec::CameraSpec};
+use super::{
+    backgrounds::{self, Backgrounds},
+    intrinsics::Intrinsics,
+    schedule::FrameClock,
+    spec::CameraSpec,
+};
 use crate::{
     mujoco::{
         render::{RenderContext, RenderModel, SceneBuffer, VisualOptions},
         ObjectKind, Simulation,
     },
     offscreen::{GlContext, RendererChoice},
+    scene,
 };
 
 /// One rendered frame, rows top-down, RGB.
@@ -52,6 +60,9 @@ pub struct RigOptions {
     pub shadows: bool,
     /// Wait for the renderer rather than skip frames (every mode but real time).
     pub wait_for_renderer: bool,
+    /// Real backgrounds behind the scene (the randomization's `backgrounds`): a folder of
+    /// pictures per fixed camera; the episode's draw picks one.
+    pub backgrounds: Option<PathBuf>,
 }
 
 /// Counters of one camera.
@@ -78,7 +89,18 @@ struct RenderJob {
     sim_time: f64,
     views: Views,
     due: Vec<usize>,
+    /// The episode's draw of backgrounds, for the views keyed with it.
+    background: Option<u64>,
     published: Option<SyncSender<()>>,
+}
+
+/// What the physics thread needs to key a view for a background.
+struct Keying {
+    /// By model geom id: whether it is scenery, replaced by the background.
+    scenery: Vec<bool>,
+    sky_radius: f64,
+    /// By camera: whether it shows a background (a fixed camera).
+    shows: Vec<bool>,
 }
 
 struct Camera {
@@ -98,6 +120,7 @@ struct RenderTotals {
 pub struct CameraRig {
     cameras: Vec<Camera>,
     options: VisualOptions,
+    keying: Option<Keying>,
     wait_for_renderer: bool,
     free: Vec<Views>,
     returned: Receiver<Views>,
@@ -172,6 +195,26 @@ impl CameraRig {
             height = height.max(camera.spec.size.height);
         }
         let model = sim.render_model(width, height);
+        let backgrounds = match &rig.backgrounds {
+            Some(dir) => {
+                let cameras: Vec<(String, bool)> = cameras
+                    .iter()
+                    .map(|camera| {
+                        let name = camera.spec.name.as_str();
+                        (name.to_owned(), !CAMERAS_ON_THE_ARM.contains(&name))
+                    })
+                    .collect();
+                Some(Arc::new(Backgrounds::load(dir, &cameras)?))
+            }
+            None => None,
+        };
+        let keying = backgrounds.as_ref().map(|backgrounds| Keying {
+            scenery: scene::background_geoms(sim),
+            sky_radius: 0.5 * sim.view_distance(),
+            shows: (0..cameras.len())
+                .map(|camera| backgrounds.shows(camera))
+                .collect(),
+        });
 
         let (batch_sender, batches) = mpsc::sync_channel::<FrameBatch>(PUBLISH_QUEUE);
         let consumer_thread = std::thread::Builder::new()
@@ -213,6 +256,7 @@ impl CameraRig {
                     model,
                     size: (width, height),
                     sizes,
+                    backgrounds,
                     jobs,
                     returns: return_sender,
                     batches: batch_sender,
@@ -241,6 +285,7 @@ impl CameraRig {
         Ok(Self {
             cameras,
             options: VisualOptions::new(rig.show_collision_geoms),
+            keying,
             wait_for_renderer: rig.wait_for_renderer,
             free,
             returned,
@@ -268,13 +313,21 @@ impl CameraRig {
     }
 
     /// Renders the cameras due at `time` from the simulation's current state (its kinematics
-    /// up to date, as World::advance leaves them). With `notify` (and
-    /// a rig that waits for its renderer), the returned receiver fires once those frames are
-    /// published.
-    pub fn capture(&mut self, sim: &mut Simulation, time: f64, notify: bool) -> Capture {
+    /// up to date, as World::advance leaves them), before the episode's `background` draw where
+    /// the rig has backgrounds (the randomization's draw; none: the sim's own scenery). With
+    /// `notify` (and a rig that waits for its renderer), the returned receiver fires once those
+    /// frames are published.
+    pub fn capture(
+        &mut self,
+        sim: &mut Simulation,
+        time: f64,
+        background: Option<u64>,
+        notify: bool,
+    ) -> Capture {
         self.capture_with(
             sim,
             time,
+            background,
             self.wait_for_renderer,
             notify && self.wait_for_renderer,
         )
@@ -282,14 +335,20 @@ impl CameraRig {
 
     /// Like [`CameraRig::capture`], but waits for the renderer in every mode and always notifies:
     /// for the first frames, which also warm the renderer up (its first draw compiles shaders).
-    pub fn capture_and_wait(&mut self, sim: &mut Simulation, time: f64) -> Capture {
-        self.capture_with(sim, time, true, true)
+    pub fn capture_and_wait(
+        &mut self,
+        sim: &mut Simulation,
+        time: f64,
+        background: Option<u64>,
+    ) -> Capture {
+        self.capture_with(sim, time, background, true, true)
     }
 
     fn capture_with(
         &mut self,
         sim: &mut Simulation,
         time: f64,
+        background: Option<u64>,
         wait: bool,
         notify: bool,
     ) -> Capture {
@@ -311,12 +370,16 @@ impl CameraRig {
             }
             return Capture::Skipped;
         };
+        let background = background.filter(|_| self.keying.is_some());
         for &index in &due {
-            sim.update_scene(
-                &mut views.0[index],
-                self.cameras[index].model_id,
-                &self.options,
-            );
+            let view = &mut views.0[index];
+            sim.update_scene(view, self.cameras[index].model_id, &self.options);
+            match (&self.keying, background) {
+                (Some(keying), Some(_)) if keying.shows[index] => {
+                    view.key(&keying.scenery, backgrounds::KEY, keying.sky_radius);
+                }
+                _ => view.unkey(),
+            }
         }
         let (published, receiver) = if notify {
             let (sender, receiver) = mpsc::sync_channel(1);
@@ -328,6 +391,7 @@ impl CameraRig {
             sim_time: time,
             views,
             due,
+            background,
             published,
         };
         match &self.jobs {
@@ -402,6 +466,7 @@ struct RenderThread {
     model: RenderModel,
     size: (u32, u32),
     sizes: Vec<(u32, u32)>,
+    backgrounds: Option<Arc<Backgrounds>>,
     jobs: Receiver<RenderJob>,
     returns: mpsc::Sender<Views>,
     batches: SyncSender<FrameBatch>,
@@ -435,6 +500,8 @@ fn render_thread(work: RenderThread) {
     }
     let _ = work.ready.send(Ok(description));
     let mut bottom_up = Vec::new();
+    // Per camera: the picture shown and its pixels fitted to the frame, bottom-up.
+    let mut fitted: Vec<Option<(usize, Vec<u8>)>> = vec![None; work.sizes.len()];
     for mut job in work.jobs.iter() {
         let started = Instant::now();
         let mut frames = Vec::with_capacity(job.due.len());
@@ -442,6 +509,20 @@ fn render_thread(work: RenderThread) {
             let (width, height) = work.sizes[camera];
             bottom_up.resize(3 * width as usize * height as usize, 0);
             context.render(&mut job.views.0[camera], width, height, &mut bottom_up);
+            if let (Some(backgrounds), Some(draw)) = (&work.backgrounds, job.background) {
+                if let Some(index) = backgrounds.pick(camera, draw) {
+                    let slot = &mut fitted[camera];
+                    if slot.as_ref().map(|(shown, _)| *shown) != Some(index) {
+                        let picture = backgrounds.picture(camera, index);
+                        let pixels =
+                            backgrounds::fitted_bottom_up(picture, width as usize, height as usize);
+                        *slot = Some((index, pixels));
+                    }
+                    if let Some((_, pixels)) = slot {
+                        backgrounds::composite(&mut bottom_up, pixels);
+                    }
+                }
+            }
             frames.push(RenderedFrame {
                 camera,
                 rgb: flip_rows(&bottom_up, 3 * width as usize),

@@ -292,6 +292,10 @@ impl Simulation {
         [all[3 * site], all[3 * site + 1], all[3 * site + 2]]
     }
 
+    pub fn geom_count(&self) -> usize {
+        self.model().ngeom as usize
+    }
+
     pub fn geom_body(&self, geom: usize) -> usize {
         self.model_int(self.model().geom_bodyid, self.model().ngeom, geom)
     }

@@ -49,6 +49,84 @@ impl SceneBuffer {
     }
 }
 
+/// The flags keying changes, and their values as mjv_defaultScene sets them.
+const KEYING_FLAGS: [(u32, u8); 2] = [
+    // The sky is the key sphere.
+    (ffi::mjRND_SKYBOX, 1),
+    (ffi::mjRND_HAZE, 1),
+];
+
+impl SceneBuffer {
+    /// Paints the geoms `keyed` (by model geom id) in `key`, unlit in effect (emission saturates
+    /// the key's channels, its zero channels stay zero: no texture, highlight or reflection), and
+    /// encloses the view in a sphere of the key for the sky. For [`crate::cameras::backgrounds`];
+    /// call after each [`Simulation::update_scene`], which rebuilds the geoms.
+    pub fn key(&mut self, keyed: &[bool], key: [u8; 3], sky_radius: f64) {
+        let rgba = [
+            f32::from(key[0]) / 255.0,
+            f32::from(key[1]) / 255.0,
+            f32::from(key[2]) / 255.0,
+            1.0,
+        ];
+        let scene = self.scene.as_mut();
+        let count = scene.ngeom.max(0) as usize;
+        // SAFETY: mjv_makeScene allocated maxgeom geoms, of which the first ngeom are set.
+        let geoms = unsafe { std::slice::from_raw_parts_mut(scene.geoms, count) };
+        for geom in geoms.iter_mut() {
+            let is_keyed = geom.objtype == ffi::mjOBJ_GEOM as i32
+                && usize::try_from(geom.objid)
+                    .ok()
+                    .and_then(|id| keyed.get(id))
+                    .copied()
+                    .unwrap_or(false);
+            if is_keyed {
+                paint(geom, rgba);
+            }
+        }
+        if scene.ngeom < scene.maxgeom {
+            // SAFETY: index ngeom < maxgeom lies within the allocation; mjv_initGeom fills it.
+            let sky = unsafe { &mut *scene.geoms.add(count) };
+            let centre = scene.camera[0].pos.map(f64::from);
+            // Mirrored on one axis, its faces wind the other way: the inside is what back-face
+            // culling keeps (culling stays on: off, the arm's meshes cost a quarter more).
+            let size = [-sky_radius, sky_radius, sky_radius];
+            // SAFETY: the pointers are to three- and nine-element arrays as MuJoCo reads them.
+            unsafe {
+                ffi::mjv_initGeom(
+                    sky,
+                    ffi::mjGEOM_SPHERE as i32,
+                    size.as_ptr(),
+                    centre.as_ptr(),
+                    std::ptr::null(),
+                    rgba.as_ptr(),
+                );
+            }
+            sky.category = ffi::mjCAT_DECOR as i32;
+            paint(sky, rgba);
+            scene.ngeom += 1;
+        }
+        for (flag, _) in KEYING_FLAGS {
+            scene.flags[flag as usize] = 0;
+        }
+    }
+
+    /// Undoes [`SceneBuffer::key`]'s flags for a view without a background.
+    pub fn unkey(&mut self) {
+        for (flag, value) in KEYING_FLAGS {
+            self.scene.flags[flag as usize] = value;
+        }
+    }
+}
+
+fn paint(geom: &mut ffi::mjvGeom, rgba: [f32; 4]) {
+    geom.rgba = rgba;
+    geom.emission = 1.0;
+    geom.specular = 0.0;
+    geom.shininess = 0.0;
+    geom.reflectance = 0.0;
+    geom.texid = -1;
+}
+
 impl Drop for SceneBuffer {
     fn drop(&mut self) {
         // SAFETY: made by mjv_makeScene, freed once.
@@ -108,6 +186,13 @@ impl Simulation {
                 scene.scene.as_mut(),
             );
         }
+    }
+
+    /// How far the cameras see (the far clipping distance, m): the key sphere of
+    /// [`SceneBuffer::key`] stays within it.
+    pub fn view_distance(&self) -> f64 {
+        let model = self.model();
+        f64::from(model.vis.map.zfar) * model.stat.extent
     }
 
     /// Vertical field of view of a model camera, in degrees (MJCF `fovy`).

@@ -1,7 +1,7 @@
 //! The randomization ranges: assets/randomization.toml (embedded, the defaults) with a user's file
 //! over it.
 
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 use serde::{Deserialize, Serialize};
 
@@ -41,6 +41,11 @@ pub struct CubeRanges {
 pub struct SceneRanges {
     pub table_colour_jitter: f64,
     pub bin_colour_jitter: f64,
+    /// Real backgrounds: a folder with a folder of pictures per fixed camera (`top/*.jpg`, ...),
+    /// one drawn per episode and camera (crate::cameras::backgrounds). Relative to the file
+    /// that names it.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub backgrounds: Option<PathBuf>,
 }
 
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -100,7 +105,22 @@ impl RandomizationConfig {
             path: path.display().to_string(),
             source,
         })?;
-        Self::from_toml(&text, &path.display().to_string())
+        let mut config = Self::from_toml(&text, &path.display().to_string())?;
+        if let (Some(backgrounds), Some(folder)) = (&config.scene.backgrounds, path.parent()) {
+            config.scene.backgrounds = Some(folder.join(backgrounds));
+        }
+        if let Some(backgrounds) = &config.scene.backgrounds {
+            if !backgrounds.is_dir() {
+                return Err(ConfigError::Invalid {
+                    path: path.display().to_string(),
+                    message: format!(
+                        "scene.backgrounds: {} is not a folder",
+                        backgrounds.display()
+                    ),
+                });
+            }
+        }
+        Ok(config)
     }
 
     pub fn from_toml(text: &str, name: &str) -> Result<Self, ConfigError> {

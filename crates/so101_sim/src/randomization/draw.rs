@@ -52,6 +52,9 @@ pub struct EpisodeDraw {
     /// Standard deviations of the observation noise (rad, m).
     pub joint_noise: f64,
     pub cube_position_noise: f64,
+    /// Which real backgrounds the fixed cameras show (with `scene.backgrounds`; drawn last, so a
+    /// config without it draws as before).
+    pub background: Option<u64>,
 }
 
 /// Cameras fixed to a link move less than those on the table: their offset is this fraction.
@@ -96,6 +99,7 @@ impl EpisodeDraw {
             armature_scale: uniform(rng, config.servos.armature_scale),
             extra_latency: uniform(rng, config.servos.latency),
         });
+        let background = config.scene.backgrounds.as_ref().map(|_| rng.gen::<u64>());
         Self {
             seed,
             cube_size_scale,
@@ -110,6 +114,7 @@ impl EpisodeDraw {
             servos,
             joint_noise: config.observation.joint_noise,
             cube_position_noise: config.observation.cube_position_noise,
+            background,
         }
     }
 }

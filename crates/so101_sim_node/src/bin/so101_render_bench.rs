@@ -1,6 +1,7 @@
 //! The anchor of the camera benchmark: a bare MuJoCo offscreen render loop on the node's scene, with
 //! nothing else (no physics, no threads, no ROS): per frame one mjv_updateScene, one mjr_render and
-//! one mjr_readPixels, cycling through the cameras. Prints one JSON line.
+//! one mjr_readPixels, cycling through the cameras. Prints one JSON line. With `--background`, each
+//! frame is also keyed and composited over that picture, as the rig does for real backgrounds.
 //!
 //! Opens no DDS participant.
 
@@ -10,7 +11,10 @@ use anyhow::{bail, Context, Result};
 use clap::Parser;
 use so101_core::ros::logging;
 use so101_sim::{
-    cameras::spec::{self, FrameSize},
+    cameras::{
+        backgrounds,
+        spec::{self, FrameSize},
+    },
     mujoco::{
         render::{RenderContext, SceneBuffer, VisualOptions},
         ObjectKind,
@@ -47,6 +51,9 @@ struct Args {
     /// Render shadows.
     #[arg(long)]
     shadows: bool,
+    /// A picture (JPEG) to composite behind the arm, cube and bin (real backgrounds).
+    #[arg(long)]
+    background: Option<std::path::PathBuf>,
 }
 
 fn main() -> Result<()> {
@@ -66,10 +73,30 @@ fn main() -> Result<()> {
     let options = VisualOptions::new(args.lite);
     let mut scene = SceneBuffer::new(&sim, args.shadows);
     let mut rgb = vec![0u8; 3 * width as usize * height as usize];
+    let background = match &args.background {
+        Some(path) => {
+            let bytes = std::fs::read(path).with_context(|| format!("{}", path.display()))?;
+            let picture = backgrounds::decode_jpeg(&bytes).map_err(anyhow::Error::msg)?;
+            Some(backgrounds::fitted_bottom_up(
+                &picture,
+                width as usize,
+                height as usize,
+            ))
+        }
+        None => None,
+    };
+    let keyed = scene::background_geoms(&sim);
+    let sky_radius = 0.5 * sim.view_distance();
     let mut frame = |index: u32| {
         let camera = cameras[index as usize % cameras.len()];
         sim.update_scene(&mut scene, camera, &options);
-        context.render(&mut scene, width, height, &mut rgb);
+        if let Some(background) = &background {
+            scene.key(&keyed, backgrounds::KEY, sky_radius);
+            context.render(&mut scene, width, height, &mut rgb);
+            backgrounds::composite(&mut rgb, background);
+        } else {
+            context.render(&mut scene, width, height, &mut rgb);
+        }
     };
     for index in 0..args.warmup {
         frame(index);

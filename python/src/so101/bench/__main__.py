@@ -7,6 +7,7 @@ import sys
 
 from .. import subcommands
 from . import (
+    backgrounds,
     camera_align,
     camera_node,
     cameras,
@@ -32,6 +33,7 @@ BENCHMARKS = {
         cameras,
         camera_node,
         camera_align,
+        backgrounds,
         expert,
         convert,
         storage,
