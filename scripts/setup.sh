@@ -8,7 +8,8 @@
 #      cameras), FFmpeg's libraries (LeRobot decodes videos with them).
 #   2. The Python venv .venv (CPython 3.12: Jazzy rclpy wheels, Fast DDS, LeRobot, pytest, the
 #      project's `so101` package in python/): scripts/setup_python.sh.
-#   3. The third-party SO-101 meshes (pinned + checksum): scripts/fetch_assets.sh.
+#   3. The third-party SO-101 meshes (pinned + checksum): scripts/fetch_assets.sh, and the pictures
+#      of the held-out shift set (scikit-image's samples, pinned + checksum): scripts/fetch_backgrounds.sh.
 #   4. A release build of the Rust workspace into $CARGO_TARGET_DIR.
 # Each step skips what is already in place, so a second run takes seconds.
 set -euo pipefail
@@ -64,6 +65,7 @@ fi
 
 "${REPO_ROOT}/scripts/setup_python.sh"
 PYTHON="${REPO_ROOT}/.venv/bin/python" "${REPO_ROOT}/scripts/fetch_assets.sh"
+PYTHON="${REPO_ROOT}/.venv/bin/python" "${REPO_ROOT}/scripts/fetch_backgrounds.sh"
 
 # Every crate, dev-dependencies included: the tests later run in a namespace without network.
 cargo fetch --locked --manifest-path "${REPO_ROOT}/Cargo.toml"

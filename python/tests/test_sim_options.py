@@ -39,7 +39,7 @@ def fit(tmp_path) -> Path:
 @pytest.mark.parametrize(
     "value, spec",
     [(True, "default"), (False, "off"), ("true", "default"), ("True", "default"), ("false", "off"), ("FALSE", "off")]
-    + [("off", "off"), ("default", "default"), (" default ", "default")],
+    + [("off", "off"), ("default", "default"), (" default ", "default"), ("heldout", "heldout"), ("HeldOut", "heldout")],
 )
 def test_randomize_words_and_booleans(value, spec):
     assert randomize_spec(value) == spec
@@ -55,7 +55,7 @@ def test_randomize_a_path_as_str_or_pathlike(ranges, monkeypatch):
 @pytest.mark.parametrize("value", ["maybe", "ranges.toml", ""])
 def test_randomize_refuses_what_is_neither_a_word_nor_a_file(value, tmp_path, monkeypatch):
     monkeypatch.chdir(tmp_path)
-    with pytest.raises(ValueError, match="'default' or a .toml file"):
+    with pytest.raises(ValueError, match="'default', 'heldout' or a .toml file"):
         randomize_spec(value)
 
 

@@ -21,6 +21,7 @@ from PIL import Image
 
 import so101  # noqa: F401 - registers the envs
 
+REPO = Path(__file__).resolve().parents[2]
 SIZE = (72, 96)  # height, width
 CAMERAS = {"top": SIZE, "front": SIZE, "wrist": SIZE}
 # Uniform pictures: whatever the fitting, a background pixel is this colour (within JPEG's rounding).
@@ -138,3 +139,31 @@ def test_stills_of_the_cameras_become_the_sims_background(tmp_path):
     rows, columns = np.nonzero(changed)
     red, green = keyed[rows, columns, 0], keyed[rows, columns, 1]
     assert np.corrcoef(columns, red)[0, 1] > 0.95 and np.corrcoef(rows, green)[0, 1] > 0.95
+
+
+def test_the_heldout_shift_set_shows_unseen_pictures_and_a_distractor(tmp_path):
+    """`randomize="heldout"`: scikit-image's pictures behind the scene (fetched at set-up) and a
+    distractor on the table that only the cameras see; the same file without the distractor draws
+    the same episode, so the distractor is what differs, in one compact place of each view."""
+    heldout = (REPO / "assets" / "randomization_heldout.toml").read_text()
+    pictures = REPO / "assets" / "third_party" / "heldout_backgrounds"
+    assert sorted(p.stem for p in (pictures / "top").glob("*.jpg")) == sorted(
+        ["brick", "chelsea", "coffee", "grass", "gravel", "hubble_deep_field", "rocket"]
+    )
+    without = tmp_path / "no_distractor.toml"
+    without.write_text(
+        heldout.replace("distractor = true", "distractor = false").replace('"third_party/heldout_backgrounds"', f'"{pictures}"')
+    )
+    env = gym.make("so101:so101/CubeToBin-v0", randomize="heldout", cameras=CAMERAS)
+    try:
+        observation, info = env.reset(seed=7)
+    finally:
+        env.close()
+    draw = info["episode_settings"]["draw"]
+    assert draw["background"] is not None and draw["distractor"] is not None
+    plain = frames(without, seed=7)
+    for camera in ("top", "front"):
+        changed = np.argwhere(np.any(observation["pixels"][camera].astype(int) != plain[camera], axis=-1))
+        assert len(changed) > 10, camera
+        (top, left), (bottom, right) = changed.min(axis=0), changed.max(axis=0)
+        assert (bottom - top + 1) * (right - left + 1) < 0.15 * SIZE[0] * SIZE[1], (camera, top, left, bottom, right)

@@ -84,7 +84,8 @@ def test_a_tiny_act_trained_on_a_converted_dataset_runs_through_the_runner(
 
     checkpoint = train_tiny_act(dataset, tmp_path / "train")
 
-    # Evaluation: one seeded episode of 2 s on the runner's own sim in lockstep, randomized.
+    # Evaluation: one seeded episode of 2 s on the runner's own sim in lockstep, on the held-out
+    # shift set (wider ranges, pictures behind the scene, a distractor).
     evaluation = tmp_path / "eval"
     done = run(
         [
@@ -98,6 +99,7 @@ def test_a_tiny_act_trained_on_a_converted_dataset_runs_through_the_runner(
             "2",
             "--lite",
             "--randomize",
+            "heldout",
             "--output",
             evaluation,
             "--quiet",
@@ -107,9 +109,10 @@ def test_a_tiny_act_trained_on_a_converted_dataset_runs_through_the_runner(
     assert done.returncode == 0, done.stdout[-3000:] + done.stderr[-3000:]
     info = json.loads((evaluation / "eval_info.json").read_text())
     assert info["aggregated"]["episodes"] == 1 and info["aggregated"]["pc_success"] in (0.0, 100.0)
-    assert info["aggregated"]["randomize"] == "default" and info["aggregated"]["servo_params"] == "sts3215"
+    assert info["aggregated"]["randomize"] == "heldout" and info["aggregated"]["servo_params"] == "sts3215"
     # The episode ran on a randomized world: the runner reports the draw the sim published.
-    assert info["per_episode"][0]["settings"]["draw"]["seed"] > 0, info["per_episode"][0]
+    draw = info["per_episode"][0]["settings"]["draw"]
+    assert draw["seed"] > 0 and draw["background"] is not None and len(draw["distractor"]["position"]) == 2, draw
     episode = info["per_episode"][0]
     assert episode["seed"] == 7 and episode["steps"] == 60, episode  # 2 s at 30 fps, unless it succeeded: it cannot
     assert math.isfinite(episode["sum_reward"]) and episode["max_reward"] >= 0.0

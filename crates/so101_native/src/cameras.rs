@@ -114,10 +114,10 @@ impl CameraSet {
     pub fn request(&mut self, env: &mut TaskEnv) -> PyResult<()> {
         let time = env.world().time();
         self.rig.restart(time);
-        let background = env.background_draw();
+        let extras = env.view_extras();
         match self
             .rig
-            .capture_and_wait(env.world_mut().simulation_mut(), time, background)
+            .capture_and_wait(env.world_mut().simulation_mut(), time, extras)
         {
             Capture::Queued(_) => Ok(()),
             Capture::Nothing | Capture::Skipped => {

@@ -8,15 +8,21 @@ use so101_core::{
 };
 
 use crate::{
+    cameras::rig::{Distractor, ViewExtras},
     mujoco::Simulation,
     placement::{CubePlacer, CubeStart, SpawnArea},
     randomization::{
         EpisodeDraw, ObservationNoise, RandomizationConfig, RandomizationSpec, Randomizer,
         SceneLook,
     },
+    scene,
     task::{self, TaskKind, TaskOutcome},
     world::{ArmState, CubePose, World, WorldError},
 };
+
+/// The distractor of the held-out shift set: a cylinder the size of a cup (m).
+pub const DISTRACTOR_RADIUS: f64 = 0.03;
+pub const DISTRACTOR_HALF_HEIGHT: f64 = 0.04;
 
 /// Where a reset may put the cube (world frame, m): every point was picked into the bin by a
 /// scripted grasp in this scene, and it stays at least 6.5 cm clear of the bin.
@@ -151,9 +157,24 @@ impl TaskEnv {
         self.randomization()?.scene.backgrounds.as_deref()
     }
 
-    /// The current episode's draw of real backgrounds (the camera rig's `background`).
-    pub fn background_draw(&self) -> Option<u64> {
-        self.draw()?.background
+    /// What the current episode's cameras show beyond the model: the randomization's draw of
+    /// real backgrounds and its distractor on the table.
+    pub fn view_extras(&self) -> ViewExtras {
+        let Some(draw) = self.draw() else {
+            return ViewExtras::default();
+        };
+        ViewExtras {
+            background: draw.background,
+            distractor: draw.distractor.map(|distractor| {
+                let [x, y] = distractor.position;
+                Distractor {
+                    centre: [x, y, scene::TABLE_TOP_Z + DISTRACTOR_HALF_HEIGHT],
+                    radius: DISTRACTOR_RADIUS,
+                    half_height: DISTRACTOR_HALF_HEIGHT,
+                    rgb: distractor.rgb,
+                }
+            }),
+        }
     }
 
     /// The randomization ranges in use, if any.

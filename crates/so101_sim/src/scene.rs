@@ -12,6 +12,9 @@ use quick_xml::{
 
 use crate::mujoco::{ObjectKind, Simulation};
 
+/// Height of the table's top in the world (m): the table_top geom's upper face.
+pub const TABLE_TOP_Z: f64 = 0.75;
+
 /// Bodies whose geoms are the workspace a real background replaces: the world's own (the floor)
 /// and the table. The arm, the cube and the bin stay in front of it.
 pub const BACKGROUND_BODIES: [&str; 2] = ["world", "table"];

@@ -98,8 +98,9 @@ pub struct Args {
     #[arg(long, default_value = DEFAULT_SERVO_MODEL, value_parser = ServoModelSpec::from_str)]
     pub servo_params: ServoModelSpec,
     /// Domain randomization at every /sim/reset: "off" (or "false"), "default" (or "true":
-    /// assets/randomization.toml) or a file of ranges (.toml). Each episode's draw is published on
-    /// /sim/episode.
+    /// assets/randomization.toml), "heldout" (the held-out shift set for evaluation:
+    /// assets/randomization_heldout.toml) or a file of ranges (.toml). Each episode's draw is
+    /// published on /sim/episode.
     #[arg(long, default_value = randomization::OFF, value_parser = RandomizationSpec::from_str)]
     pub randomize: RandomizationSpec,
     /// Where your real cameras stand: a file from `so101-camera-align estimate` (.toml) placing

@@ -8,7 +8,7 @@ use so101_core::{
 };
 use so101_sim::{
     cameras::spec::{MAX_RATE, MIN_RATE},
-    randomization::spec::{DEFAULT, OFF},
+    randomization::spec::{DEFAULT, HELDOUT, OFF},
 };
 
 use crate::{cli::Args, pacing::TimeMode};
@@ -55,7 +55,7 @@ pub fn declarations(args: &Args, limits: &[JointLimit; JOINT_COUNT]) -> Paramete
         options
             .declare("randomize", text(&args.randomize))
             .effect(&format!(
-                "Served as \"{OFF}\", \"{DEFAULT}\" or the file's path."
+                "Served as \"{OFF}\", \"{DEFAULT}\", \"{HELDOUT}\" or the file's path."
             )),
         options
             .declare(

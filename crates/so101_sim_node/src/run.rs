@@ -464,14 +464,9 @@ impl SimLoop {
     fn capture_frames(&mut self, notify: bool) -> Option<std::sync::mpsc::Receiver<()>> {
         let rig = self.cameras.as_mut()?;
         let time = self.env.world().time();
-        let background = self.env.background_draw();
-        rig.capture(
-            self.env.world_mut().simulation_mut(),
-            time,
-            background,
-            notify,
-        )
-        .published()
+        let extras = self.env.view_extras();
+        rig.capture(self.env.world_mut().simulation_mut(), time, extras, notify)
+            .published()
     }
 
     /// Hands the frames due now (every camera's, after a start or reset) to the renderer, waiting
@@ -479,8 +474,8 @@ impl SimLoop {
     fn capture_every_frame(&mut self) -> Option<std::sync::mpsc::Receiver<()>> {
         let rig = self.cameras.as_mut()?;
         let time = self.env.world().time();
-        let background = self.env.background_draw();
-        rig.capture_and_wait(self.env.world_mut().simulation_mut(), time, background)
+        let extras = self.env.view_extras();
+        rig.capture_and_wait(self.env.world_mut().simulation_mut(), time, extras)
             .published()
     }
 

@@ -2,7 +2,8 @@
 (so101_native's World and WorldBatch, so101_sim_node's --randomize and --servo-params):
 
   randomize     True or "true" / "default": the default ranges (assets/randomization.toml);
-                False or "false" / "off": none; a path (str or os.PathLike) to a .toml of ranges
+                False or "false" / "off": none; "heldout": the held-out shift set for evaluation
+                (assets/randomization_heldout.toml); a path (str or os.PathLike) to a .toml of ranges
   servo_params  a servo model by name (SERVO_MODELS) or a path to a so101-sysid fit file (.json)
   camera_poses  None (or "") for the scene's cameras, or a path to so101-camera-align's file
                 (.toml) placing the cameras where the user's real ones stand
@@ -25,20 +26,26 @@ DEFAULT_SERVO_MODEL = contract.DEFAULT_SERVO_MODEL
 
 RANDOMIZE_OFF = "off"
 RANDOMIZE_DEFAULT = "default"
-_RANDOMIZE_WORDS = {"off": RANDOMIZE_OFF, "false": RANDOMIZE_OFF, "default": RANDOMIZE_DEFAULT, "true": RANDOMIZE_DEFAULT}
+RANDOMIZE_HELDOUT = "heldout"
+_RANDOMIZE_WORDS = {
+    "off": RANDOMIZE_OFF,
+    "false": RANDOMIZE_OFF,
+    "default": RANDOMIZE_DEFAULT,
+    "true": RANDOMIZE_DEFAULT,
+    "heldout": RANDOMIZE_HELDOUT,
+}
+_RANDOMIZE_FORMS = "True, False, 'off', 'default', 'heldout' or"
 
 
 def randomize_spec(value: object) -> str:
-    """`randomize` as the simulation takes it: "off", "default" or the path of a .toml file."""
+    """`randomize` as the simulation takes it: "off", "default", "heldout" or the path of a .toml file."""
     if isinstance(value, bool):
         return RANDOMIZE_DEFAULT if value else RANDOMIZE_OFF
     if isinstance(value, str) and value.strip().lower() in _RANDOMIZE_WORDS:
         return _RANDOMIZE_WORDS[value.strip().lower()]
     if isinstance(value, (str, os.PathLike)):
-        return _existing_file(value, None, "randomize", "True, False, 'off', 'default' or a .toml file of ranges")
-    raise TypeError(
-        f"randomize={value!r} ({type(value).__name__}): True, False, 'off', 'default' or the path of a .toml file of ranges"
-    )
+        return _existing_file(value, None, "randomize", f"{_RANDOMIZE_FORMS} a .toml file of ranges")
+    raise TypeError(f"randomize={value!r} ({type(value).__name__}): {_RANDOMIZE_FORMS} the path of a .toml file of ranges")
 
 
 def servo_params_spec(value: object) -> str:
@@ -88,7 +95,8 @@ def add_arguments(parser: argparse.ArgumentParser | argparse._ArgumentGroup) -> 
         default=RANDOMIZE_OFF,
         metavar="RANGES",
         help="domain randomization of every episode, seeded by its seed: the default ranges "
-        "(assets/randomization.toml; also `true`), `off`/`false`, or a .toml of your own",
+        "(assets/randomization.toml; also `true`), `off`/`false`, `heldout` (the held-out shift set, "
+        "for evaluation: assets/randomization_heldout.toml), or a .toml of your own",
     )
     parser.add_argument(
         "--camera-poses",

@@ -65,6 +65,24 @@ pub struct RigOptions {
     pub backgrounds: Option<PathBuf>,
 }
 
+/// What the views show beyond the model: the episode's draws that only the cameras see.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct ViewExtras {
+    /// The draw of real backgrounds, for a rig that has them (none: the sim's own scenery).
+    pub background: Option<u64>,
+    /// An object on the table, in every camera's view.
+    pub distractor: Option<Distractor>,
+}
+
+/// An upright cylinder the cameras see (no collision).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Distractor {
+    pub centre: [f64; 3],
+    pub radius: f64,
+    pub half_height: f64,
+    pub rgb: [f32; 3],
+}
+
 /// Counters of one camera.
 #[derive(Debug, Clone, Default)]
 pub struct CameraCounters {
@@ -313,21 +331,20 @@ impl CameraRig {
     }
 
     /// Renders the cameras due at `time` from the simulation's current state (its kinematics
-    /// up to date, as World::advance leaves them), before the episode's `background` draw where
-    /// the rig has backgrounds (the randomization's draw; none: the sim's own scenery). With
-    /// `notify` (and a rig that waits for its renderer), the returned receiver fires once those
-    /// frames are published.
+    /// up to date, as World::advance leaves them), with the episode's `extras` (the
+    /// randomization's background and distractor). With `notify` (and a rig that waits for its
+    /// renderer), the returned receiver fires once those frames are published.
     pub fn capture(
         &mut self,
         sim: &mut Simulation,
         time: f64,
-        background: Option<u64>,
+        extras: ViewExtras,
         notify: bool,
     ) -> Capture {
         self.capture_with(
             sim,
             time,
-            background,
+            extras,
             self.wait_for_renderer,
             notify && self.wait_for_renderer,
         )
@@ -339,16 +356,16 @@ impl CameraRig {
         &mut self,
         sim: &mut Simulation,
         time: f64,
-        background: Option<u64>,
+        extras: ViewExtras,
     ) -> Capture {
-        self.capture_with(sim, time, background, true, true)
+        self.capture_with(sim, time, extras, true, true)
     }
 
     fn capture_with(
         &mut self,
         sim: &mut Simulation,
         time: f64,
-        background: Option<u64>,
+        extras: ViewExtras,
         wait: bool,
         notify: bool,
     ) -> Capture {
@@ -370,10 +387,18 @@ impl CameraRig {
             }
             return Capture::Skipped;
         };
-        let background = background.filter(|_| self.keying.is_some());
+        let background = extras.background.filter(|_| self.keying.is_some());
         for &index in &due {
             let view = &mut views.0[index];
             sim.update_scene(view, self.cameras[index].model_id, &self.options);
+            if let Some(distractor) = extras.distractor {
+                view.add_cylinder(
+                    distractor.centre,
+                    distractor.radius,
+                    distractor.half_height,
+                    distractor.rgb,
+                );
+            }
             match (&self.keying, background) {
                 (Some(keying), Some(_)) if keying.shows[index] => {
                     view.key(&keying.scenery, backgrounds::KEY, keying.sky_radius);

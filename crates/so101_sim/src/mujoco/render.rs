@@ -110,6 +110,34 @@ impl SceneBuffer {
         }
     }
 
+    /// Adds an upright cylinder to the view (seen by the camera only: not in the model, so no
+    /// collision), lit like the scene's geoms. Call after [`Simulation::update_scene`] and before
+    /// [`SceneBuffer::key`].
+    pub fn add_cylinder(&mut self, centre: [f64; 3], radius: f64, half_height: f64, rgb: [f32; 3]) {
+        let scene = self.scene.as_mut();
+        if scene.ngeom >= scene.maxgeom {
+            return;
+        }
+        let rgba = [rgb[0], rgb[1], rgb[2], 1.0];
+        let size = [radius, radius, half_height];
+        // SAFETY: index ngeom < maxgeom lies within the allocation; mjv_initGeom fills it from
+        // three-element size and position arrays (a null matrix: upright).
+        unsafe {
+            let geom = &mut *scene.geoms.add(scene.ngeom as usize);
+            ffi::mjv_initGeom(
+                geom,
+                ffi::mjGEOM_CYLINDER as i32,
+                size.as_ptr(),
+                centre.as_ptr(),
+                std::ptr::null(),
+                rgba.as_ptr(),
+            );
+            geom.category = ffi::mjCAT_DECOR as i32;
+            geom.specular = 0.2;
+        }
+        scene.ngeom += 1;
+    }
+
     /// Undoes [`SceneBuffer::key`]'s flags for a view without a background.
     pub fn unkey(&mut self) {
         for (flag, value) in KEYING_FLAGS {

@@ -8,6 +8,10 @@ use serde::{Deserialize, Serialize};
 /// The project's documented defaults, compiled in so every door has them without a path.
 pub const DEFAULT_TOML: &str = include_str!("../../../../assets/randomization.toml");
 
+/// The held-out shift set (assets/randomization_heldout.toml), compiled in; its pictures are
+/// fetched at set-up into assets/third_party/heldout_backgrounds.
+pub const HELDOUT_TOML: &str = include_str!("../../../../assets/randomization_heldout.toml");
+
 /// A closed interval to draw from uniformly.
 pub type Range = [f64; 2];
 
@@ -46,6 +50,10 @@ pub struct SceneRanges {
     /// that names it.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub backgrounds: Option<PathBuf>,
+    /// A distractor on the table, seen by the cameras only (no collision): a cylinder of a
+    /// random colour beside the cube's area, placed anew each episode.
+    #[serde(default)]
+    pub distractor: bool,
 }
 
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -89,7 +97,7 @@ pub enum ConfigError {
     },
     #[error("randomization {path}: {message}")]
     Invalid { path: String, message: String },
-    #[error("{0:?} is not a randomization: use off (or false), default (or true) or a file of ranges (.toml)")]
+    #[error("{0:?} is not a randomization: use off (or false), default (or true), heldout or a file of ranges (.toml)")]
     Choice(String),
 }
 
@@ -105,22 +113,42 @@ impl RandomizationConfig {
             path: path.display().to_string(),
             source,
         })?;
-        let mut config = Self::from_toml(&text, &path.display().to_string())?;
-        if let (Some(backgrounds), Some(folder)) = (&config.scene.backgrounds, path.parent()) {
-            config.scene.backgrounds = Some(folder.join(backgrounds));
+        let name = path.display().to_string();
+        Self::from_toml(&text, &name)?.with_backgrounds_from(path.parent(), &name, "")
+    }
+
+    /// The held-out shift set: its file's keys over the defaults, its pictures from assets/.
+    pub fn heldout() -> Result<Self, ConfigError> {
+        let assets = Path::new(so101_core::robot::DEFAULT_SCENE).parent();
+        Self::from_toml(HELDOUT_TOML, "heldout")?.with_backgrounds_from(
+            assets,
+            "heldout",
+            " (fetched by scripts/setup.sh: run it, or scripts/fetch_backgrounds.sh)",
+        )
+    }
+
+    /// `scene.backgrounds` relative to `folder` (the file that names it), and there.
+    fn with_backgrounds_from(
+        mut self,
+        folder: Option<&Path>,
+        name: &str,
+        hint: &str,
+    ) -> Result<Self, ConfigError> {
+        if let (Some(backgrounds), Some(folder)) = (&self.scene.backgrounds, folder) {
+            self.scene.backgrounds = Some(folder.join(backgrounds));
         }
-        if let Some(backgrounds) = &config.scene.backgrounds {
+        if let Some(backgrounds) = &self.scene.backgrounds {
             if !backgrounds.is_dir() {
                 return Err(ConfigError::Invalid {
-                    path: path.display().to_string(),
+                    path: name.to_owned(),
                     message: format!(
-                        "scene.backgrounds: {} is not a folder",
+                        "scene.backgrounds: {} is not a folder{hint}",
                         backgrounds.display()
                     ),
                 });
             }
         }
-        Ok(config)
+        Ok(self)
     }
 
     pub fn from_toml(text: &str, name: &str) -> Result<Self, ConfigError> {
@@ -222,6 +250,23 @@ mod tests {
         assert!(error.contains("cameras.position_jitter"), "{error}");
         let bytes = b"[lighting]\nambient = [1.12, 66666666666666666666666666666666666666666666666666666666666666666666666666666666666660.40]\n";
         crate::randomization::fuzzing::randomization_toml(bytes);
+    }
+
+    #[test]
+    fn backgrounds_are_found_from_the_file_that_names_them_or_refused() {
+        let dir = std::env::temp_dir().join(format!("so101_ranges_{}", std::process::id()));
+        std::fs::create_dir_all(dir.join("stills")).unwrap();
+        let file = dir.join("desk.toml");
+        std::fs::write(&file, "[scene]\nbackgrounds = \"stills\"\n").unwrap();
+        let config = RandomizationConfig::load(&file).unwrap();
+        assert_eq!(config.scene.backgrounds, Some(dir.join("stills")));
+        std::fs::write(&file, "[scene]\nbackgrounds = \"elsewhere\"\n").unwrap();
+        let error = RandomizationConfig::load(&file).unwrap_err().to_string();
+        assert!(
+            error.contains("elsewhere") && error.contains("not a folder"),
+            "{error}"
+        );
+        std::fs::remove_dir_all(&dir).unwrap();
     }
 
     #[test]

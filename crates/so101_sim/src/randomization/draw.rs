@@ -33,6 +33,19 @@ pub struct CameraDraw {
     pub fovy_offset: f64,
 }
 
+/// Where the distractor stands (world frame, m; on the table beside the cube's spawn area, clear of
+/// it by more than the distractor's radius and on the far side from the bin) and its colour.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct DistractorDraw {
+    pub position: [f64; 2],
+    pub rgb: [f32; 3],
+}
+
+/// The distractor's area on the table: x, y ranges (m).
+pub const DISTRACTOR_AREA: [Range; 2] = [[0.08, 0.38], [0.13, 0.28]];
+/// Its colour's range on each of r, g, b: never the key colour of real backgrounds.
+const DISTRACTOR_COLOUR: Range = [0.1, 0.9];
+
 /// Everything one episode changes. Colours are offsets added to the scene's r, g, b.
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct EpisodeDraw {
@@ -52,9 +65,11 @@ pub struct EpisodeDraw {
     /// Standard deviations of the observation noise (rad, m).
     pub joint_noise: f64,
     pub cube_position_noise: f64,
-    /// Which real backgrounds the fixed cameras show (with `scene.backgrounds`; drawn last, so a
-    /// config without it draws as before).
+    /// Which real backgrounds the fixed cameras show (with `scene.backgrounds`; drawn after the
+    /// rest, so a config without it draws as before).
     pub background: Option<u64>,
+    /// The distractor (with `scene.distractor`; drawn last).
+    pub distractor: Option<DistractorDraw>,
 }
 
 /// Cameras fixed to a link move less than those on the table: their offset is this fraction.
@@ -100,6 +115,10 @@ impl EpisodeDraw {
             extra_latency: uniform(rng, config.servos.latency),
         });
         let background = config.scene.backgrounds.as_ref().map(|_| rng.gen::<u64>());
+        let distractor = config.scene.distractor.then(|| DistractorDraw {
+            position: DISTRACTOR_AREA.map(|range| uniform(rng, range)),
+            rgb: std::array::from_fn(|_| uniform(rng, DISTRACTOR_COLOUR) as f32),
+        });
         Self {
             seed,
             cube_size_scale,
@@ -115,6 +134,7 @@ impl EpisodeDraw {
             joint_noise: config.observation.joint_noise,
             cube_position_noise: config.observation.cube_position_noise,
             background,
+            distractor,
         }
     }
 }
@@ -150,6 +170,34 @@ mod tests {
         let a = EpisodeDraw::new(&config, 7, 2, &cameras);
         assert_eq!(a, EpisodeDraw::new(&config, 7, 2, &cameras));
         assert_ne!(a, EpisodeDraw::new(&config, 8, 2, &cameras));
+    }
+
+    #[test]
+    fn backgrounds_and_the_distractor_are_drawn_after_the_rest() {
+        let plain = RandomizationConfig::defaults();
+        let mut shifted = plain.clone();
+        shifted.scene.backgrounds = Some("backgrounds".into());
+        shifted.scene.distractor = true;
+        for seed in 0..200 {
+            let (a, b) = (
+                EpisodeDraw::new(&plain, seed, 2, &[false]),
+                EpisodeDraw::new(&shifted, seed, 2, &[false]),
+            );
+            assert_eq!((a.background, a.distractor), (None, None));
+            // Everything else as without them: a file adding them changes nothing else.
+            let extras = |draw: &EpisodeDraw| EpisodeDraw {
+                background: None,
+                distractor: None,
+                ..draw.clone()
+            };
+            assert_eq!(extras(&b), a);
+            let distractor = b.distractor.unwrap();
+            assert!(b.background.is_some());
+            for (value, [low, high]) in distractor.position.iter().zip(DISTRACTOR_AREA) {
+                assert!((low..=high).contains(value));
+            }
+            assert!(distractor.rgb.iter().all(|c| (0.1..=0.9).contains(c)));
+        }
     }
 
     #[test]

@@ -10,23 +10,30 @@ use super::config::{ConfigError, RandomizationConfig};
 pub const OFF: &str = "off";
 /// The ranges of assets/randomization.toml.
 pub const DEFAULT: &str = "default";
+/// The held-out shift set of assets/randomization_heldout.toml.
+pub const HELDOUT: &str = "heldout";
 
 /// What to randomize with, and how the user named it.
 #[derive(Debug, Clone, PartialEq)]
 pub struct RandomizationSpec {
-    /// `off`, `default` or the file's path: what the node's parameters and logs show.
+    /// `off`, `default`, `heldout` or the file's path: what the node's parameters and logs show.
     name: String,
     config: Option<RandomizationConfig>,
 }
 
 impl RandomizationSpec {
-    /// `off` or `false`, `default` or `true` (either case), or the path of a file of ranges
-    /// (.toml).
+    /// `off` or `false`, `default` or `true` (either case), `heldout`, or the path of a file of
+    /// ranges (.toml).
     pub fn parse(text: &str) -> Result<Self, ConfigError> {
         if text == OFF || text.eq_ignore_ascii_case("false") {
             Ok(Self::off())
         } else if text == DEFAULT || text.eq_ignore_ascii_case("true") {
             Ok(Self::default_ranges())
+        } else if text == HELDOUT {
+            Ok(Self {
+                name: HELDOUT.to_owned(),
+                config: Some(RandomizationConfig::heldout()?),
+            })
         } else if text.ends_with(".toml") || Path::new(text).is_file() {
             Self::load(Path::new(text))
         } else {
@@ -123,6 +130,34 @@ mod tests {
             RandomizationSpec::from_flag(false),
             RandomizationSpec::default()
         );
+    }
+
+    #[test]
+    fn heldout_widens_every_range_and_adds_pictures_and_a_distractor() {
+        let defaults = RandomizationConfig::defaults();
+        // Its pictures are fetched by scripts/setup.sh, which the test command runs first.
+        let spec = RandomizationSpec::parse(HELDOUT).unwrap();
+        assert_eq!(spec.name(), HELDOUT);
+        let heldout = spec.config().unwrap();
+        let wider = |[low, high]: [f64; 2], [d_low, d_high]: [f64; 2]| {
+            low <= d_low && high >= d_high && (low, high) != (d_low, d_high)
+        };
+        assert!(wider(heldout.cube.size_scale, defaults.cube.size_scale));
+        assert!(wider(heldout.cube.mass_scale, defaults.cube.mass_scale));
+        assert!(wider(
+            heldout.lighting.intensity_scale,
+            defaults.lighting.intensity_scale
+        ));
+        assert!(wider(heldout.lighting.ambient, defaults.lighting.ambient));
+        assert!(wider(heldout.servos.gain_scale, defaults.servos.gain_scale));
+        assert!(wider(heldout.servos.latency, defaults.servos.latency));
+        assert!(heldout.cube.colour_jitter > defaults.cube.colour_jitter);
+        assert!(heldout.lighting.direction_jitter > defaults.lighting.direction_jitter);
+        assert!(heldout.cameras.position_jitter > defaults.cameras.position_jitter);
+        assert!(heldout.cameras.fovy_jitter > defaults.cameras.fovy_jitter);
+        assert!(heldout.scene.distractor && !defaults.scene.distractor);
+        let pictures = heldout.scene.backgrounds.as_ref().unwrap();
+        assert!(pictures.join("top").is_dir() && pictures.join("front").is_dir());
     }
 
     #[test]
