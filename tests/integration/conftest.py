@@ -60,6 +60,11 @@ if _worker.startswith("gw"):
 def pytest_configure(config: pytest.Config) -> None:
     # Noise from the ROS wheels' dependencies (lark-parser imports sre_parse).
     config.addinivalue_line("filterwarnings", "ignore:module 'sre_:DeprecationWarning")
+    config.addinivalue_line(
+        "markers",
+        "alone: a peer that times each answer on its own clock in a busy-polling loop; scripts/test.sh "
+        "runs these after the parallel phase, with no other test worker beside them",
+    )
 
 
 # =========================================================================== namespace guard

@@ -24,8 +24,8 @@ VENV_BIN = Path(sys.executable).parent
 CAMERAS = "top:64x48,wrist:64x48"
 
 
-def run(argv: list[str], timeout: float, **kwargs) -> subprocess.CompletedProcess:
-    env = {**os.environ, "HF_HUB_OFFLINE": "1", "WANDB_MODE": "disabled"}
+def run(argv: list[str], timeout: float, env_extra: dict | None = None, **kwargs) -> subprocess.CompletedProcess:
+    env = {**os.environ, "HF_HUB_OFFLINE": "1", "WANDB_MODE": "disabled", **(env_extra or {})}
     return subprocess.run([str(a) for a in argv], capture_output=True, text=True, timeout=timeout, env=env, **kwargs)
 
 
@@ -117,6 +117,28 @@ def test_a_tiny_act_trained_on_a_converted_dataset_runs_through_the_runner(
     assert episode["seed"] == 7 and episode["steps"] == 60, episode  # 2 s at 30 fps, unless it succeeded: it cannot
     assert math.isfinite(episode["sum_reward"]) and episode["max_reward"] >= 0.0
     assert "1 episode(s): success" in done.stdout, done.stdout
+
+    # The same episodes in-process, in one process and split over two: the same numbers, bit for
+    # bit at one torch thread each (with another count, rewards differ in their 8th digit).
+    reports = {}
+    for workers in (1, 2):
+        output = tmp_path / f"eval_inprocess_{workers}"
+        done = run(
+            [VENV_BIN / "so101-run-policy", checkpoint, "--eval", "3", "--seed", "11", "--episode-time", "1", "--lite",
+             "--backend", "inprocess", "--workers", str(workers), "--videos", "1", "--output", output, "--quiet"],
+            timeout=300,
+            env_extra={"OMP_NUM_THREADS": "1"},
+        )  # fmt: skip
+        assert done.returncode == 0, done.stdout[-3000:] + done.stderr[-3000:]
+        reports[workers] = json.loads((output / "eval_info.json").read_text())
+    sequential, split = reports[1]["per_episode"], reports[2]["per_episode"]
+    assert [e["seed"] for e in split] == [11, 12, 13]
+    for alone, shared in zip(sequential, split):
+        assert {k: alone[k] for k in ("seed", "success", "steps", "sum_reward", "max_reward")} == {
+            k: shared[k] for k in ("seed", "success", "steps", "sum_reward", "max_reward")
+        }
+    assert reports[1]["aggregated"] == reports[2]["aggregated"]
+    assert split[0]["video"] and not split[1]["video"]
 
     import av
 

@@ -8,7 +8,8 @@ so101_sim_node and so101_feetech_driver: both speak the same topics. When an inp
 last target) until it is fresh again.
 
 Evaluation (--eval N): N seeded episodes on a sim of its own in lockstep (physics waits for the
-policy), success rate, mean and best reward, an MP4 per episode and eval_info.json in --output.
+policy), success rate, mean and best reward, an MP4 per episode and eval_info.json in --output;
+with --backend inprocess --workers K, the episodes split over K processes.
 
 Run it inside scripts/isolated with the arm's node (evaluation starts its own sim).
 """
@@ -196,8 +197,10 @@ def run_live(args, policy: StackPolicy) -> int:
 
 # =========================================================================== evaluation
 def evaluate(args, policy: StackPolicy) -> int:
-    from ..envs import make_env
-    from .episodes import run_episodes, summarize, write_report
+    """--eval: the episodes in this process with `policy`, or over --workers processes (each loads
+    the policy itself)."""
+    from . import parallel
+    from .episodes import summarize, write_report
 
     cameras = {camera.name: (camera.height, camera.width) for camera in policy.cameras}
     # The video shows the policy's cameras, or --video-camera; a policy without cameras is filmed
@@ -212,41 +215,16 @@ def evaluate(args, policy: StackPolicy) -> int:
     # Episodes past --videos run on a sim without the extra video camera: rendering it would cost
     # more than the rest of the step.
     batches = [(0, seeds[:filmed], filmed_cameras, video_cameras), (filmed, seeds[filmed:], cameras, [])]
-
-    def act(observation: dict) -> np.ndarray:
-        pixels = observation.get("pixels", {})
-        return policy.act(policy.observation(observation["agent_pos"], pixels, observation["environment_state"]))
-
-    results = []
-    for first_index, batch_seeds, env_cameras, filmed_now in batches:
-        if not batch_seeds:
-            continue
-        env = make_env(
-            args.sim_task,
-            backend=args.backend,
-            control_rate=args.fps,
-            lite=args.lite,
-            cameras=env_cameras or None,
-            dense_reward=args.reward == "dense",
-            servo_params=args.servo_params,
-            randomize=args.randomize,
-            camera_poses=args.camera_poses,
-        )
-        try:
-            results += run_episodes(
-                env,
-                act,
-                lambda _observation: policy.reset(),
-                seeds=batch_seeds,
-                max_steps=int(round(args.episode_time * args.fps)),
-                video_cameras=filmed_now,
-                output=Path(args.output),
-                fps=args.fps,
-                quiet=args.quiet,
-                first_index=first_index,
-            )
-        finally:
-            env.close()
+    jobs = [
+        (args, first_index, share, env_cameras, filmed_now)
+        for first, batch_seeds, env_cameras, filmed_now in batches
+        for first_index, share in parallel.split(batch_seeds, first, args.workers)
+        if share
+    ]
+    if args.workers > 1:
+        results = parallel.run_shares(evaluate_share, jobs, args.workers)
+    else:
+        results = [result for job in jobs for result in run_share(policy, *job)]
     summary = summarize(
         results,
         policy=args.policy,
@@ -260,6 +238,58 @@ def evaluate(args, policy: StackPolicy) -> int:
     )
     write_report(Path(args.output), summary, results)
     return 0
+
+
+def load_policy(args) -> StackPolicy:
+    task = args.task or contract.TASKS[args.sim_task].description
+    return StackPolicy(args.policy, units=args.units, device=args.device, task=task)
+
+
+def evaluate_share(args, first_index: int, seeds: list[int], env_cameras: dict, filmed_now: list[str]):
+    """A worker's share of --eval: its own policy, torch threads and simulation."""
+    import torch
+
+    from . import parallel
+
+    torch.set_num_threads(parallel.threads_per_worker(args.workers))
+    return run_share(load_policy(args), args, first_index, seeds, env_cameras, filmed_now)
+
+
+def run_share(policy: StackPolicy, args, first_index: int, seeds: list[int], env_cameras: dict, filmed_now: list[str]):
+    from ..envs import make_env
+    from .episodes import run_episodes
+
+    def act(observation: dict) -> np.ndarray:
+        pixels = observation.get("pixels", {})
+        return policy.act(policy.observation(observation["agent_pos"], pixels, observation["environment_state"]))
+
+    env = make_env(
+        args.sim_task,
+        backend=args.backend,
+        control_rate=args.fps,
+        lite=args.lite,
+        cameras=env_cameras or None,
+        dense_reward=args.reward == "dense",
+        servo_params=args.servo_params,
+        randomize=args.randomize,
+        camera_poses=args.camera_poses,
+    )
+    try:
+        return run_episodes(
+            env,
+            act,
+            lambda _observation: policy.reset(),
+            seeds=seeds,
+            max_steps=int(round(args.episode_time * args.fps)),
+            video_cameras=filmed_now,
+            output=Path(args.output),
+            fps=args.fps,
+            # Workers' bars would interleave: the parent reports.
+            quiet=args.quiet or args.workers > 1,
+            first_index=first_index,
+        )
+    finally:
+        env.close()
 
 
 # =========================================================================== entry point
@@ -336,6 +366,14 @@ def parser() -> argparse.ArgumentParser:
     ev.add_argument(
         "--videos", type=int, default=None, metavar="K", help="film only the first K episodes (default: every episode)"
     )
+    ev.add_argument(
+        "--workers",
+        type=int,
+        default=1,
+        metavar="K",
+        help="split the episodes over K processes, each with its own policy and sim (--backend inprocess); "
+        "eval_info.json is the same as one process's",
+    )
     ev.add_argument("--output", default="eval", help="directory for eval_info.json and videos/")
     return p
 
@@ -352,13 +390,16 @@ def main(argv: list[str] | None = None) -> int:
         raise SystemExit("so101-run-policy: --videos must not be negative")
     if args.episode_time <= 0:
         raise SystemExit("so101-run-policy: --episode-time must be positive")
+    if args.workers < 1:
+        raise SystemExit("so101-run-policy: --workers must be at least 1")
+    if args.workers > 1 and args.backend != "inprocess":
+        raise SystemExit("so101-run-policy: --workers needs --backend inprocess (each worker simulates in its own process)")
     modes = contract.TASKS[args.sim_task].reward_modes
     args.reward = args.reward or reward_mode(args.sim_task, dense_reward=True)
     if args.reward not in modes:
         raise SystemExit(f"so101-run-policy: {args.sim_task} has no {args.reward} reward (it offers: {', '.join(modes)})")
     try:
-        task = args.task or contract.TASKS[args.sim_task].description
-        policy = StackPolicy(args.policy, units=args.units, device=args.device, task=task)
+        policy = load_policy(args)
         return evaluate(args, policy) if args.eval > 0 else run_live(args, policy)
     except PolicyError as error:
         # Loading or a non-finite action: the runner stops sending, the arm's node holds.
