@@ -66,9 +66,10 @@ if [ ! -f "${image_dir}/root.img" ]; then
 fi
 
 # The nodes under test, as the suite built them.
+# (the workspace build of scripts/setup.sh: nothing to do after the suite; a build of just these
+# two packages would resolve features apart and compile for a minute.)
 log "building so101_camera_node and recorder_node"
-cargo build --release --locked -p so101_camera_node -p recorder_node --bins >/dev/null 2>&1 \
-    || cargo build --release --locked -p so101_camera_node -p recorder_node --bins
+cargo build --release --locked --workspace >/dev/null 2>&1 || cargo build --release --locked --workspace
 run_dir="$(mktemp -d "${TMPDIR:-/tmp}/so101-vm-run.XXXXXX")"
 trap 'rm -rf "${run_dir}"' EXIT
 mkdir -p "${run_dir}/payload/bin"

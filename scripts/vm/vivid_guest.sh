@@ -16,7 +16,7 @@ bin="${payload}/bin"
 device=/dev/video0
 width=320
 height=180
-fps=30
+fps=15
 gain=10
 
 event() { printf '%s %s\n' "$(date +%s.%N)" "$*" >>"${out}/events.txt"; echo "vivid_guest: $*"; }

@@ -17,7 +17,7 @@ import numpy as np
 COMPRESSED = "/camera/top/image_raw/compressed"
 CAMERA_INFO = "/camera/top/camera_info"
 # The mode the guest script asks for.
-WIDTH, HEIGHT, FPS = 320, 180, 30.0
+WIDTH, HEIGHT, FPS = 320, 180, 15.0
 GAIN = 10
 # Formats the node takes (modes::PixelFormat).
 NODE_FORMATS = ("MJPG", "YUYV")
@@ -69,8 +69,14 @@ def summary_counts(log: str) -> dict[str, float]:
         "unplugs": r"(\d+) unplugs",
         "stream_errors": r"(\d+) stream errors",
         "latency_p50_ms": r"latency p50 ([\d.]+) ms",
+        "stamped_ahead": r"(\d+) frames stamped after the node's clock",
     }
-    return {key: float(re.search(pattern, line).group(1)) for key, pattern in patterns.items()}
+    counts = {}
+    for key, pattern in patterns.items():
+        found = re.search(pattern, line)
+        # Latency: only of frames stamped before the node's clock; none stamped after: 0.
+        counts[key] = float(found.group(1)) if found else (None if key == "latency_p50_ms" else 0.0)
+    return counts
 
 
 def controls_of(text: str) -> dict[str, int]:
@@ -126,6 +132,15 @@ class Results:
             frames.append(Frame(stamp.sec + stamp.nanosec * 1e-9, log_time * 1e-9, bytes(ros.data)))
         return frames
 
+    def diagnostics(self) -> list[tuple[float, dict[str, str]]]:
+        """The node's /diagnostics for camera top: (log time in s, its key-values), in order."""
+        found = []
+        for array, log_time in self.messages("/diagnostics"):
+            for status in array.status:
+                if status.name.endswith(": top"):
+                    found.append((log_time * 1e-9, {kv.key: kv.value for kv in status.values}))
+        return found
+
     def driver_picture(self) -> np.ndarray:
         """v4l2-ctl's own frame (YUYV), as OpenCV turns it into RGB (BT.601, limited range)."""
         import cv2
@@ -159,7 +174,8 @@ def report(results: Results) -> str:
         f"{results.text('vm-seconds.txt').strip()} s; v4l2-ctl {reference:.2f} fps, node {rate:.2f} fps "
         f"({rate / reference:.3f} of it) at {WIDTH}x{HEIGHT} YUYV; node summary: {counts['frames']:.0f} frames, "
         f"{counts['node_drops']:.0f} dropped while behind, {counts['device_drops']:.0f} by the camera, "
-        f"latency p50 {counts['latency_p50_ms']:.1f} ms, CPU {cpu_ms:.1f} ms a frame"
+        f"{counts['broken']:.0f} broken, {counts['stamped_ahead']:.0f} stamped after the node's clock, "
+        f"CPU {cpu_ms:.1f} ms a frame"
     )
 
 
