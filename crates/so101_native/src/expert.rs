@@ -1,6 +1,7 @@
 //! The scripted cube_to_bin expert in-process (so101_core::expert, the planner teleop_node's
 //! expert source uses), for demonstrations at simulation speed: plan from the settled cube, then
-//! joint targets at each instant of the plan, moved at most `max_step` per period.
+//! each period the joint targets for the arm as measured (the plan waits at its gates for the
+//! ramped servos), moved at most `max_step` per period.
 
 use nalgebra::Vector3;
 use numpy::{PyArray1, PyReadonlyArray1};
@@ -93,13 +94,54 @@ impl Expert {
         Ok(duration)
     }
 
-    /// Joint targets (rad) `t` seconds into the plan (held at its end).
-    fn targets_at<'py>(&mut self, py: Python<'py>, t: f64) -> PyResult<Bound<'py, PyArray1<f64>>> {
+    /// The joint targets (rad) of the next period of `period` seconds, for the arm at `joints`
+    /// (rad, as measured): the plan waits at its gates for the arm (held at its end). The cube's
+    /// world pose now (position m, orientation w x y z), when given, is where a regrasp goes.
+    #[pyo3(signature = (joints, period, cube_position = None, cube_orientation = None))]
+    fn step<'py>(
+        &mut self,
+        py: Python<'py>,
+        joints: PyReadonlyArray1<'_, f64>,
+        period: f64,
+        cube_position: Option<PyReadonlyArray1<'_, f64>>,
+        cube_orientation: Option<PyReadonlyArray1<'_, f64>>,
+    ) -> PyResult<Bound<'py, PyArray1<f64>>> {
+        let measured = joint_targets(joints.as_slice()?)?;
+        let cube = match (cube_position, cube_orientation) {
+            (Some(position), Some(orientation)) => {
+                let position: [f64; 3] = array(position.as_slice()?, "cube_position")?;
+                let orientation: [f64; 4] = array(orientation.as_slice()?, "cube_orientation")?;
+                let in_base = Vector3::from(position) - Vector3::from(SIM_BASE_IN_WORLD);
+                Some((in_base, cube_yaw(orientation)))
+            }
+            (None, None) => None,
+            _ => {
+                return Err(PyValueError::new_err(
+                    "cube_position and cube_orientation: both or neither",
+                ))
+            }
+        };
+        if !(period.is_finite() && period > 0.0) {
+            return Err(PyValueError::new_err(format!("period {period}: not > 0")));
+        }
         let Some(plan) = &mut self.plan else {
             return Err(PyValueError::new_err("no plan: call plan() after a reset"));
         };
-        let wanted = plan.targets_at(t, &self.config, &mut self.rng);
+        let wanted = plan.step(period, &measured, cube, &self.config, &mut self.rng);
         self.last = follow(&self.last, &wanted, self.max_step);
         Ok(PyArray1::from_slice(py, &self.last))
+    }
+
+    /// The plan has been played to its end (false before a plan).
+    #[getter]
+    fn finished(&self) -> bool {
+        self.plan.as_ref().is_some_and(Plan::finished)
+    }
+
+    /// How many times this episode's plan went back up to grasp again (a jaw had landed on the
+    /// cube, or the jaws closed on nothing).
+    #[getter]
+    fn regrasps(&self) -> u32 {
+        self.plan.as_ref().map_or(0, Plan::regrasps)
     }
 }

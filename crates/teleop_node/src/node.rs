@@ -303,6 +303,7 @@ pub fn run(args: Args) -> Result<()> {
             targets = measured;
         }
         scene.targets = targets;
+        scene.measured = measured;
         // The source is read even before the arm's pose is known, so its controls (quit) work.
         let reading = source.read(&Tick {
             now,

@@ -40,8 +40,9 @@ enum State {
         reset_failures: u64,
     },
     Run {
-        plan: Plan,
-        start: f64,
+        plan: Box<Plan>,
+        /// The clock when the plan last stepped.
+        last: f64,
         cube: [f64; 4],
     },
     Judge {
@@ -112,8 +113,8 @@ impl Expert {
                     seed: Some(self.seed.wrapping_mul(1_000_003).wrapping_add(episode)),
                 });
                 self.state = State::Run {
-                    plan,
-                    start: now,
+                    plan: Box::new(plan),
+                    last: now,
                     cube,
                 };
             }
@@ -210,10 +211,27 @@ impl Source for Expert {
                 }
                 hold()
             }
-            State::Run { plan, start, cube } => {
-                let elapsed = tick.now - *start;
-                let targets = plan.targets_at(elapsed, &self.config, &mut self.rng);
-                if elapsed > plan.duration() {
+            State::Run { plan, last, cube } => {
+                let dt = (tick.now - *last).max(0.0);
+                *last = tick.now;
+                // The plan waits for the arm it sees; the targets stand in until /joint_states does.
+                let Some(measured) = tick.scene.measured.or(tick.scene.targets) else {
+                    return Reading {
+                        request: hold(),
+                        controls,
+                    };
+                };
+                let cube_now = tick.scene.cube.map(|(position, orientation)| {
+                    (
+                        Vector3::from(position) - self.base_in_world,
+                        cube_yaw(orientation),
+                    )
+                });
+                let targets = plan.step(dt, &measured, cube_now, &self.config, &mut self.rng);
+                if plan.finished() {
+                    if plan.regrasps() > 0 {
+                        tracing::info!(regrasps = plan.regrasps(), "the expert grasped again");
+                    }
                     let cube = *cube;
                     self.state = State::Judge {
                         until: tick.now + JUDGE_SECONDS,

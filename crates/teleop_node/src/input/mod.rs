@@ -65,6 +65,8 @@ pub struct Scene {
     pub task_success: bool,
     /// The node's current joint targets (`None` until the arm's position is known).
     pub targets: Option<JointPositions>,
+    /// The arm's latest measured positions (/joint_states).
+    pub measured: Option<JointPositions>,
     /// /sim/reset calls that failed so far.
     pub reset_failures: u64,
 }

@@ -4,7 +4,9 @@ observations (so101.envs): demonstrations for behaviour cloning at simulation sp
 It is teleop_node's expert (the planner in so101_core::expert, called through so101_native):
 from the settled cube's pose, a grasp from above, a lift, a carry over the bin and a release, as
 timed waypoints turned into joint targets by the shared IK, each target moved at most `max_step`
-rad per period. The noise options are teleop_node's (--waypoint-noise, --action-noise).
+rad per period. The plan waits at its gates for the arm it observes (the grasp reached, the
+gripper closed, the arm over the bin) and goes back up to grasp again (at most twice) when a jaw
+lands on the cube or the jaws close on nothing (at the cube's pose of the observation). The noise options are teleop_node's (--waypoint-noise, --action-noise).
 
     env = gym.make("so101/CubeToBin-v0")
     expert = ExpertPolicy(waypoint_noise=0.005, action_noise=0.01, seed=1)
@@ -34,7 +36,6 @@ class ExpertPolicy:
 
         self._expert = so101_native.Expert(waypoint_noise=waypoint_noise, action_noise=action_noise, seed=seed, max_step=max_step)
         self._period = 1.0 / control_rate
-        self._steps = 0
         self.duration = 0.0
 
     def reset(self, observation: dict) -> float:
@@ -44,15 +45,24 @@ class ExpertPolicy:
         self.duration = self._expert.plan(
             np.asarray(observation["agent_pos"], dtype=np.float64), cube[:3].copy(), cube[3:7].copy()
         )
-        self._steps = 0
         return self.duration
 
-    def __call__(self, observation: dict | None = None) -> np.ndarray:
-        """The joint targets of the next control period (rad, float32[6])."""
-        self._steps += 1
-        return self._expert.targets_at(self._steps * self._period).astype(np.float32)
+    def __call__(self, observation: dict) -> np.ndarray:
+        """The joint targets of the next control period (rad, float32[6]) for the arm of
+        `observation` (its agent_pos: the plan waits for the arm at its gates)."""
+        joints = np.asarray(observation["agent_pos"], dtype=np.float64)
+        cube = observation.get("environment_state")
+        if cube is None:
+            return self._expert.step(joints, self._period).astype(np.float32)
+        cube = np.asarray(cube, dtype=np.float64)
+        return self._expert.step(joints, self._period, cube[:3].copy(), cube[3:7].copy()).astype(np.float32)
 
     @property
     def done(self) -> bool:
         """The plan has been played to its end (the cube released over the bin)."""
-        return self._steps * self._period >= self.duration
+        return self._expert.finished
+
+    @property
+    def regrasps(self) -> int:
+        """How many times this episode's plan went back up to grasp again."""
+        return self._expert.regrasps
