@@ -129,3 +129,48 @@ def test_a_dataset_with_cameras_gets_a_backbone_from_scratch_and_colour_augmenta
     assert transforms["brightness"]["type"] == "ColorJitter"
     diffusion = command("cameras", "diffusion")
     assert "--dataset.image_transforms.enable=true" in diffusion and "--policy.pretrained_backbone_weights=null" in diffusion
+
+
+def test_several_processes_train_through_accelerates_launcher(tmp_path):
+    args = parse("act", "--dataset", str(tmp_path), "--num-processes", "2", "--policy-arg=--policy.foo=1")
+    command = lerobot_train.train_command(args, tmp_path / "out")
+    assert Path(command[0]).name == "accelerate" and command[1] == "launch"
+    assert "--num_processes=2" in command
+    module = command.index("-m")
+    assert command[module + 1] == "lerobot.scripts.lerobot_train"
+    # lerobot-train's own arguments follow unchanged, the extra ones last.
+    assert "--policy.type=act" in command[module:] and command[-1] == "--policy.foo=1"
+    assert Path(lerobot_train.train_command(parse("act", "--dataset", str(tmp_path)), tmp_path)[0]).name == "lerobot-train"
+
+
+def test_a_gpu_gets_more_loader_processes_than_the_cpu(tmp_path, monkeypatch):
+    monkeypatch.setattr("os.cpu_count", lambda: 16)
+    workers = {
+        device: next(
+            a
+            for a in lerobot_train.train_command(parse("act", "--dataset", str(tmp_path), "--device", device), tmp_path)
+            if a.startswith("--num_workers=")
+        )
+        for device in ("cpu", "cuda")
+    }
+    assert workers == {"cpu": "--num_workers=1", "cuda": "--num_workers=8"}
+    two_gpus = parse("act", "--dataset", str(tmp_path), "--device", "cuda", "--num-processes", "2")
+    assert "--num_workers=7" in lerobot_train.train_command(two_gpus, tmp_path)
+    chosen = parse("act", "--dataset", str(tmp_path), "--device", "cuda", "--loader-workers", "3")
+    assert "--num_workers=3" in lerobot_train.train_command(chosen, tmp_path)
+
+
+def test_inprocess_demos_take_the_sims_camera_notation_with_sizes():
+    from so101.learn.demos_inprocess import camera_sizes
+
+    assert camera_sizes("none") == {}
+    assert camera_sizes("top:96x72,wrist:64x48") == {"top": (72, 96), "wrist": (48, 64)}
+    for wrong in ("top", "side:96x72", "top:24x18", "top:96by72"):
+        with pytest.raises((ValueError, argparse.ArgumentTypeError)):
+            camera_sizes(wrong)
+
+
+def test_demos_record_in_parallel_only_in_process(tmp_path):
+    args = parse("demos", "--workers", "2", "--output", str(tmp_path))
+    with pytest.raises(SystemExit, match="--backend inprocess"):
+        demos.run(args)

@@ -88,6 +88,20 @@ def test_a_recipe_trains_on_the_demos_and_evaluates_through_the_runner(demos, re
     assert "success:" in done.stdout and "over 2 episodes" in done.stdout
 
 
+def test_two_processes_train_one_policy_through_accelerate_on_the_cpu(demos, tmp_path):
+    """LeRobot's multi-GPU path (accelerate launch, DDP), here on the CPU's gloo backend: both
+    processes step, each on its own batch, and the main one writes one checkpoint."""
+    output = tmp_path / "ddp"
+    tiny = ["--policy.dim_model=32", "--policy.n_heads=2", "--policy.dim_feedforward=64", "--policy.n_encoder_layers=1"]
+    argv = ["act", "--dataset", str(demos), "--steps", "3", "--batch-size", "4", "--num-processes", "2", "--eval", "0"]
+    done = learn(*argv, "--output", str(output), *[f"--policy-arg={arg}" for arg in tiny], timeout=300)
+    log = done.stdout + done.stderr
+    assert "Effective batch size: 4 x 2 = 8" in log, log[-3000:]
+    checkpoint = output / "checkpoints" / "last" / "pretrained_model"
+    assert json.loads((checkpoint / "config.json").read_text())["dim_model"] == 32
+    assert (checkpoint / "model.safetensors").is_file()
+
+
 def assert_actions_within_the_samplers_clip_range(checkpoint: Path, config: dict, dataset: Path) -> None:
     """Diffusion's sampler clips every denoised action chunk to +-clip_sample_range in normalised
     units: LeRobot's own preprocessor, as saved with the policy, must put the demonstrations'

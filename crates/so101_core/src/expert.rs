@@ -36,6 +36,10 @@ pub struct ExpertConfig {
 pub const SIM_BIN_IN_WORLD: [f64; 3] = [0.10, -0.22, 0.77];
 /// Height of the sim scene's table top (world frame, m).
 pub const SIM_TABLE_Z: f64 = 0.75;
+/// Seconds an expert episode goes on once the task succeeds (its recording ends on the success).
+pub const SUCCESS_SHOWN_SECONDS: f64 = 0.5;
+/// Seconds after the plan's end for the task to succeed, else the episode failed.
+pub const JUDGE_SECONDS: f64 = 1.5;
 /// Gripper targets of the expert's open and closed jaws (rad).
 pub const GRIPPER_OPEN: f64 = 0.9;
 pub const GRIPPER_CLOSED: f64 = -0.17;

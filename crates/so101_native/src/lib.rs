@@ -19,6 +19,11 @@ fn so101_native(module: &Bound<'_, PyModule>) -> PyResult<()> {
     module.add_class::<expert::Expert>()?;
     module.add("STATE_SIZE", so101_sim::env::STATE_SIZE)?;
     module.add("SETTLE_SECONDS", so101_sim::env::SETTLE_SECONDS)?;
+    module.add(
+        "EXPERT_SUCCESS_SHOWN_SECONDS",
+        so101_core::expert::SUCCESS_SHOWN_SECONDS,
+    )?;
+    module.add("EXPERT_JUDGE_SECONDS", so101_core::expert::JUDGE_SECONDS)?;
     module.add_function(wrap_pyfunction!(mujoco_version, module)?)?;
     module.add_function(wrap_pyfunction!(scene_xml, module)?)?;
     module.add_function(wrap_pyfunction!(sysid::servo_params_json, module)?)?;

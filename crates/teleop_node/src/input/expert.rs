@@ -6,7 +6,7 @@ use nalgebra::Vector3;
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use serde::Serialize;
-use so101_core::expert::{cube_yaw, ExpertConfig, Plan};
+use so101_core::expert::{cube_yaw, ExpertConfig, Plan, JUDGE_SECONDS, SUCCESS_SHOWN_SECONDS};
 
 use super::{Reading, Request, Source, Tick};
 use crate::{controls::Control, motion::Jog};
@@ -16,10 +16,6 @@ use crate::{controls::Control, motion::Jog};
 const SETTLE_MESSAGES: u64 = 30;
 /// Seconds to wait for the settled cube and the arm's pose before the episode counts as failed.
 const SETTLE_TIMEOUT: f64 = 10.0;
-/// Seconds the episode goes on once /task/success is true.
-const SUCCESS_SHOWN_SECONDS: f64 = 0.5;
-/// Seconds after the plan's end for /task/success to turn true.
-const JUDGE_SECONDS: f64 = 1.5;
 
 /// One finished episode.
 #[derive(Debug, Clone, Serialize)]

@@ -11,6 +11,9 @@ For a camera policy: --cameras top:96x72,front:96x72,wrist:96x72 --lite --no-env
 (small cameras of the scene without meshes, rendered at the size the policy sees, and no cube pose:
 the policy must find the cube in the pictures). 100 such episodes took 3.6 min to record and 3.4
 to convert.
+
+--backend inprocess records the same demonstrations without ROS, straight into the dataset,
+--workers N processes in parallel (so101.learn.demos_inprocess); the stack's path stays the default.
 """
 
 from __future__ import annotations
@@ -31,6 +34,14 @@ REPO_ID = "local/so101_demos"
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--episodes", type=int, default=50, help="demonstrations to record")
+    p.add_argument(
+        "--backend",
+        choices=["ros", "inprocess"],
+        default="ros",
+        help="ros: through the stack (sim node, teleop_node's expert, recorder, bags, conversion); inprocess: the "
+        "same simulation and expert in this machine's processes, written straight into the dataset",
+    )
+    p.add_argument("--workers", type=int, default=1, help="--backend inprocess: processes recording in parallel")
     p.add_argument("--seed", type=int, default=0, help="seed of the sim's cube placements and the expert's noise")
     p.add_argument("--waypoint-noise", type=float, default=0.005, help="expert: noise on each waypoint's position (m)")
     p.add_argument("--action-noise", type=float, default=0.01, help="expert: noise on every joint target (rad)")
@@ -92,9 +103,13 @@ def convert_command(args, output: Path) -> list[str]:
 def run(args) -> int:
     if args.episodes <= 0:
         raise SystemExit("so101-learn demos: --episodes must be positive")
+    if args.workers <= 0 or (args.workers > 1 and args.backend != "inprocess"):
+        raise SystemExit("so101-learn demos: --workers N (N >= 1) records in parallel with --backend inprocess only")
     output = Path(args.output or repo_root() / "runs" / f"demos-{time.strftime('%Y%m%d-%H%M%S')}")
     if (output / "dataset").exists():
         raise SystemExit(f"so101-learn demos: {output / 'dataset'} exists already")
+    if args.backend == "inprocess":
+        return run_inprocess(args, output)
     output.mkdir(parents=True, exist_ok=True)
 
     started = time.monotonic()
@@ -121,4 +136,54 @@ def run(args) -> int:
         f"  dataset: {output / 'dataset'} (repo id {args.repo_id})\n"
         f"Next: so101-learn act --dataset {output / 'dataset'}"
     )
+    return 0
+
+
+def run_inprocess(args, output: Path) -> int:
+    from ..dataset.check import run as check_dataset
+    from . import demos_inprocess
+
+    try:
+        cameras = demos_inprocess.camera_sizes(args.cameras)
+    except ValueError as error:
+        raise SystemExit(f"so101-learn demos: {error}") from None
+    options = demos_inprocess.Options(
+        seed=args.seed,
+        waypoint_noise=args.waypoint_noise,
+        action_noise=args.action_noise,
+        cameras=cameras,
+        lite=args.lite,
+        environment_state=not args.no_environment_state,
+        keep_failures=args.keep_failures,
+        servo_params=args.servo_params,
+        randomize=args.randomize,
+        camera_poses=args.camera_poses,
+        repo_id=args.repo_id,
+    )
+    output.mkdir(parents=True, exist_ok=True)
+    started = time.monotonic()
+    workers = min(args.workers, args.episodes)
+    print(
+        f"==> recording {args.episodes} expert demonstration(s) in-process on {workers} worker(s) into {output / 'dataset'}",
+        flush=True,
+    )
+    results = demos_inprocess.record(options, args.episodes, workers, output / "dataset")
+    for result in results:
+        verdict = "success" if result.success else "failure"
+        kept = "" if result.kept else ", left out"
+        print(
+            f"{contract.EPISODE_DEFAULT_PREFIX}_{result.episode + 1:04d}: {result.frames} frames ({verdict}{kept}): {result.note}"
+        )
+    seconds = time.monotonic() - started
+    kept = [r for r in results if r.kept]
+    successes = sum(r.success for r in results)
+    print(
+        f"\nSummary: {len(results)} demonstration(s) played, {successes} successful, {len(kept)} kept "
+        f"({sum(r.frames for r in kept)} frames), in {seconds:.0f} s ({60 * len(results) / max(seconds, 1e-9):.1f}/min)"
+    )
+    if not kept:
+        raise SystemExit("so101-learn demos: no episode to keep (--keep-failures keeps the failed ones)")
+    if check_dataset(output / "dataset"):
+        raise SystemExit(f"so101-learn demos: the dataset check found problems in {output / 'dataset'}")
+    print(f"  dataset: {output / 'dataset'} (repo id {args.repo_id})\nNext: so101-learn act --dataset {output / 'dataset'}")
     return 0

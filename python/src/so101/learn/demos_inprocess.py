@@ -1,0 +1,231 @@
+"""`so101-learn demos --backend inprocess --workers N`: the expert's demonstrations recorded through
+the in-process door (so101_native: the simulation core and the planner teleop_node's expert runs)
+straight into a LeRobot dataset, N processes in parallel, without ROS, bags or conversion.
+
+The dataset is the one the stack's path makes (`--backend ros`, the default: so101-launch records
+bags that so101-bag-to-lerobot converts): the same features, units, fps, task text and provenance
+(meta/so101_simulation.json), the same episodes of one `--seed` (the sim's sequence of cube
+placements and randomization draws), each played as teleop_node plays it: the plan from the
+settled cube, the targets each period, the verdict once the task succeeds (the episode goes on
+SUCCESS_SHOWN seconds) or JUDGE seconds after the plan ends. The expert's noise differs: the
+stack's draws follow ROS's timing, these are seeded per episode (the same for any N).
+
+Each worker writes the dataset of its contiguous share of the episodes; LeRobot's
+aggregate_datasets joins them in episode order, and so101-dataset-check checks the result.
+"""
+
+from __future__ import annotations
+
+import json
+import shutil
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from .. import contract
+from ..dataset.convert import MIN_VIDEO_WIDTH, ROBOT_TYPE, SIMULATION_FILE, features_for, image_size
+from ..evaluate.parallel import run_shares, split
+from ..units import lerobot_from_radians
+
+
+def camera_sizes(text: str) -> dict[str, tuple[int, int]]:
+    """The sim's --cameras notation with sizes ("none", "top:96x72,wrist:96x72") -> {name: (height,
+    width)}. In-process every camera names its size: the sim node's default size is its own."""
+    if text.strip().lower() in ("", "none"):
+        return {}
+    sizes = {}
+    for item in text.split(","):
+        name, _, size = item.strip().partition(":")
+        if name not in contract.CAMERA_NAMES:
+            raise ValueError(f"--cameras {text!r}: {name!r} is none of {', '.join(contract.CAMERA_NAMES)}")
+        if not size:
+            raise ValueError(f"--cameras {text!r}: name each camera's size in-process, e.g. {name}:96x72")
+        width, height = image_size(size)
+        if width < MIN_VIDEO_WIDTH:
+            raise ValueError(
+                f"--cameras {text!r}: {name} narrower than {MIN_VIDEO_WIDTH} px, which the video encoder cannot take"
+            )
+        sizes[name] = (height, width)
+    return sizes
+
+
+@dataclass(frozen=True)
+class Options:
+    """What every worker records with (picklable: sent to spawned processes)."""
+
+    seed: int
+    waypoint_noise: float
+    action_noise: float
+    cameras: dict[str, tuple[int, int]]
+    lite: bool
+    environment_state: bool
+    keep_failures: bool
+    servo_params: str
+    randomize: str
+    camera_poses: str | None
+    repo_id: str
+    task: str = "cube_to_bin"
+
+
+@dataclass
+class Recorded:
+    """One episode as the expert played it, whether or not it went into the dataset."""
+
+    episode: int  # 0-based index in the --seed sequence
+    success: bool
+    frames: int
+    kept: bool
+    note: str
+    simulation: dict | None
+
+
+def expert_seed(seed: int, episode: int) -> int:
+    """The expert's noise seed of one episode: independent of how episodes are shared out."""
+    return seed * 1_000_003 + episode + 1
+
+
+def play_episode(env, expert, observation: dict, reward: float, success: bool, limit: int) -> tuple[dict, bool]:
+    """Runs one episode as teleop_node's expert source does, from its first observation. Returns
+    its frames (radians; per frame the observation and the target commanded then) and the verdict."""
+    import so101_native
+
+    period = 1.0 / contract.CONTROL_RATE
+    frames: dict[str, list] = {"state": [], "action": [], "reward": [], "success": [], "cube": [], "images": []}
+    action = np.asarray(observation["agent_pos"], dtype=np.float32)
+    judged_from = succeeded_at = None
+    for step in range(limit):
+        now = step * period
+        if judged_from is None:
+            action = expert(observation)
+            if expert.done:
+                judged_from = now
+        frames["state"].append(np.asarray(observation["agent_pos"], dtype=np.float64))
+        frames["action"].append(np.asarray(action, dtype=np.float64))
+        frames["reward"].append(reward)
+        frames["success"].append(success)
+        frames["cube"].append(np.asarray(observation["environment_state"], dtype=np.float32))
+        frames["images"].append(observation.get("pixels", {}))
+        if judged_from is not None:
+            if success and succeeded_at is None:
+                succeeded_at = now
+            if succeeded_at is not None and now >= succeeded_at + so101_native.EXPERT_SUCCESS_SHOWN_SECONDS - 1e-9:
+                return frames, True
+            if succeeded_at is None and now > judged_from + so101_native.EXPERT_JUDGE_SECONDS:
+                return frames, False
+        observation, reward, _, _, info = env.step(action)
+        success = bool(info["is_success"])
+    return frames, False
+
+
+def record_share(options: Options, first: int, count: int, root: str) -> list[Recorded]:
+    """Records episodes first .. first+count-1 of the --seed sequence into a dataset at `root`
+    (created when an episode is kept). Runs in a worker process."""
+    import datasets
+    from lerobot.datasets.lerobot_dataset import LeRobotDataset
+
+    from ..dataset.convert import quiet_video_encoder
+    from ..envs.inprocess import So101InProcessEnv
+    from ..evaluate.expert import ExpertPolicy
+
+    quiet_video_encoder()
+    datasets.disable_progress_bars()  # one bar per saved episode otherwise, from every worker
+    env = So101InProcessEnv(
+        task=options.task,
+        lite=options.lite,
+        cameras=options.cameras or None,
+        servo_params=options.servo_params,
+        randomize=options.randomize,
+        camera_poses=options.camera_poses,
+    )
+    task_text = contract.TASKS[options.task].description
+    limit = 2 * contract.TASKS[options.task].episode_steps
+    dataset = None
+    recorded: list[Recorded] = []
+    # The sim node's sequence: its first /sim/reset gives the seed's first placement and draw.
+    observation, info = env.reset(seed=options.seed)
+    for _ in range(first):
+        observation, info = env.reset()
+    for episode in range(first, first + count):
+        if episode > first:
+            observation, info = env.reset()
+        settings = info["episode_settings"]
+        expert = ExpertPolicy(
+            waypoint_noise=options.waypoint_noise, action_noise=options.action_noise, seed=expert_seed(options.seed, episode)
+        )
+        try:
+            expert.reset(observation)
+        except ValueError as error:  # out of reach: teleop_node counts it, records nothing
+            recorded.append(Recorded(episode, False, 0, False, str(error), settings))
+            continue
+        frames, success = play_episode(env, expert, observation, 0.0, bool(info["is_success"]), limit)
+        kept = success or options.keep_failures
+        if kept:
+            if dataset is None:
+                dataset = LeRobotDataset.create(
+                    repo_id=options.repo_id,
+                    fps=int(contract.CONTROL_RATE),
+                    features=features_for(options.cameras, use_videos=True, environment_state=options.environment_state),
+                    root=root,
+                    robot_type=ROBOT_TYPE,
+                    use_videos=True,
+                )
+            write_episode(dataset, frames, success, task_text, options.environment_state)
+        note = "cube in the bin" if success else "the cube is not in the bin"
+        recorded.append(Recorded(episode, success, len(frames["state"]), kept, note, settings))
+    if dataset is not None:
+        dataset.finalize()
+    return recorded
+
+
+def write_episode(dataset, frames: dict, success: bool, task: str, environment_state: bool) -> None:
+    state = lerobot_from_radians(np.stack(frames["state"])).astype(np.float32)
+    action = lerobot_from_radians(np.stack(frames["action"])).astype(np.float32)
+    verdicts = np.array(frames["success"], dtype=bool)
+    verdicts[-1] = success  # the episode's verdict is its last frame's, as in a converted bag
+    for k in range(len(state)):
+        frame = {
+            "observation.state": state[k],
+            "action": action[k],
+            "next.reward": np.array([frames["reward"][k]], dtype=np.float32),
+            "next.success": verdicts[k : k + 1],
+            "task": task,
+        }
+        if environment_state:
+            frame["observation.environment_state"] = frames["cube"][k]
+        for name, image in frames["images"][k].items():
+            frame[f"observation.images.{name}"] = image
+        dataset.add_frame(frame)
+    dataset.save_episode()
+
+
+def record(options: Options, episodes: int, workers: int, output: Path) -> list[Recorded]:
+    """`episodes` demonstrations on `workers` processes into the dataset at `output` (which must
+    not exist); every episode's record, in order."""
+    shares = [(first, len(seeds)) for first, seeds in split(list(range(episodes)), 0, workers)]
+    shards = output.parent / f".{output.name}-shards"
+    if shards.exists():
+        shutil.rmtree(shards)
+    shards.mkdir(parents=True)
+    jobs = [(options, first, count, str(shards / f"{k:03d}")) for k, (first, count) in enumerate(shares)]
+    results = record_share(*jobs[0]) if len(jobs) == 1 else run_shares(record_share, jobs, len(jobs))
+    roots = [Path(root) for _, _, _, root in jobs if (Path(root) / "meta" / "info.json").exists()]
+    if roots:
+        join(options.repo_id, roots, output)
+        simulation = [
+            {"episode_index": index, "bag": f"inprocess episode {r.episode} of seed {options.seed}", "simulation": r.simulation}
+            for index, r in enumerate(r for r in results if r.kept)
+        ]
+        (output / SIMULATION_FILE).write_text(json.dumps({"episodes": simulation}, indent=1))
+    shutil.rmtree(shards)
+    return results
+
+
+def join(repo_id: str, roots: list[Path], output: Path) -> None:
+    """The shards as one dataset at `output`, in their order (LeRobot's own aggregation)."""
+    if len(roots) == 1:
+        shutil.move(str(roots[0]), str(output))
+        return
+    from lerobot.datasets.aggregate import aggregate_datasets
+
+    aggregate_datasets(repo_ids=[repo_id] * len(roots), aggr_repo_id=repo_id, roots=roots, aggr_root=output)
