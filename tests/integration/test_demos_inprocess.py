@@ -19,6 +19,10 @@ import pytest
 VENV_BIN = Path(sys.executable).parent
 # A noise-free expert: on the stack's path its noise draws follow ROS's timing.
 QUIET_EXPERT = ["--episodes", "2", "--seed", "11", "--waypoint-noise", "0", "--action-noise", "0", "--keep-failures"]
+CAMERA = ["--lite", "--cameras", "top:32x24"]
+# The stack's path at twice real time: a speed a loaded 2-core machine keeps (at 8x beside other
+# tests the sim falls behind, /joint_states go stale for frames, and the frames' instants drift).
+STACK = ["--speed", "2"]
 
 
 def learn(*argv: str, timeout: float) -> subprocess.CompletedProcess:
@@ -33,11 +37,12 @@ def datasets(tmp_path_factory) -> dict[str, Path]:
     """Each path on the nominal sim and on the randomized one (the seed's draws)."""
     root = tmp_path_factory.mktemp("demos_doors")
     runs = {
-        "ros": [],
+        "ros": STACK,
         "inprocess": ["--backend", "inprocess"],
-        "ros_randomized": ["--randomize"],
-        "inprocess_randomized": ["--randomize", "--backend", "inprocess"],
-        "inprocess_randomized_2": ["--randomize", "--backend", "inprocess", "--workers", "2"],
+        # With a small camera: the shards' videos are joined too.
+        "ros_randomized": ["--randomize", *CAMERA, *STACK],
+        "inprocess_randomized": ["--randomize", *CAMERA, "--backend", "inprocess"],
+        "inprocess_randomized_2": ["--randomize", *CAMERA, "--backend", "inprocess", "--workers", "2"],
     }
     for name, extra in runs.items():
         done = learn("demos", *QUIET_EXPERT, *extra, "--output", str(root / name), timeout=240)
@@ -49,7 +54,16 @@ def episodes(root: Path) -> dict[int, dict[str, np.ndarray]]:
     import pandas as pd
 
     frames = pd.concat([pd.read_parquet(path) for path in sorted(glob.glob(str(root / "data" / "*" / "*.parquet")))])
-    columns = ["observation.state", "action", "observation.environment_state", "next.success"]
+    columns = [
+        "observation.state",
+        "action",
+        "observation.environment_state",
+        "next.success",
+        "next.reward",
+        "frame_index",
+        "timestamp",
+        "index",
+    ]
     return {
         int(index): {column: np.stack(group[column].to_numpy()) for column in columns}
         for index, group in frames.groupby("episode_index")
@@ -66,6 +80,17 @@ def test_the_workers_write_the_dataset_one_process_writes(datasets):
     for index in one:
         for column, values in one[index].items():
             np.testing.assert_array_equal(values, two[index][column], err_msg=f"episode {index} {column}")
+    # The second episode's pictures come from the second worker's video, joined after the first's.
+    from lerobot.datasets.lerobot_dataset import LeRobotDataset
+
+    frames = [
+        LeRobotDataset("local/so101_demos", root=datasets[name]) for name in ("inprocess_randomized", "inprocess_randomized_2")
+    ]
+    assert frames[0].meta.total_episodes == frames[1].meta.total_episodes == 2
+    for index in (0, len(frames[0]) - 1, len(frames[0]) - 20):
+        np.testing.assert_array_equal(
+            frames[0][index]["observation.images.top"].numpy(), frames[1][index]["observation.images.top"].numpy()
+        )
     simulation = [entry["simulation"] for entry in meta(datasets["inprocess_randomized"], "so101_simulation.json")["episodes"]]
     assert simulation == [
         entry["simulation"] for entry in meta(datasets["inprocess_randomized_2"], "so101_simulation.json")["episodes"]

@@ -115,6 +115,12 @@ pub fn python_module() -> String {
         out += &format!("    ({:?}, {:?}),\n", limit.min, limit.max);
     }
     out += ")\n";
+    out += &format!(
+        "# An end-effector action or state (so101_core::ee_action): the grasp point in the base\n\
+         # frame (m), the approach pitch and the jaws' roll (rad), the gripper's joint (rad).\n\
+         EE_NAMES = ({})\n",
+        quoted(&crate::ee_action::EE_NAMES)
+    );
     out += &format!("CAMERA_NAMES = ({})\n", quoted(&CAMERA_NAMES));
     out += &format!("CAMERAS_ON_THE_ARM = ({},)\n", quoted(&CAMERAS_ON_THE_ARM));
     out += &format!(

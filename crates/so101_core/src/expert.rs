@@ -93,12 +93,18 @@ struct Waypoint {
 
 /// A grasp point nearer than this to its target has reached it, m.
 const REACHED_TOLERANCE: f64 = 0.004;
-/// The gripper moving less than this in one period has stopped, rad.
-const GRIPPER_STILL: f64 = 0.002;
+/// The gripper moving less than this a period for this many periods in a row has stopped, rad
+/// (the action noise on its target moves it by less).
+const GRIPPER_STILL: f64 = 0.01;
+const GRIPPER_STILL_PERIODS: u32 = 3;
+/// The longest step the plan's clock takes at once, s (a caller's stall is not followed).
+const MAX_STEP_SECONDS: f64 = 0.1;
 /// Seconds a gate waits at most; the plan then goes on as timed.
 const GATE_TIMEOUT: f64 = 1.0;
-/// Seconds at the grasp gate before an unreached grasp counts as blocked.
-const BLOCKED_AFTER: f64 = 0.4;
+/// An unreached grasp that got less than STALLED_PROGRESS (m) nearer in BLOCKED_AFTER seconds
+/// of waiting is blocked.
+const BLOCKED_AFTER: f64 = 0.3;
+const STALLED_PROGRESS: f64 = 0.001;
 /// A gripper closed to within this of its closed target holds nothing (holding the cube it
 /// stops about 0.35 rad short), rad.
 const EMPTY_GRIP: f64 = 0.15;
@@ -126,12 +132,17 @@ pub struct Plan {
     clock: f64,
     /// Gates before this waypoint have opened.
     next_gate: usize,
-    /// Seconds the current gate has waited.
+    /// Seconds the current gate has waited, and (when, how far) the arm was at its last look.
     waited: f64,
-    /// The gripper's position at the last step (the Gripped gate sees it stop).
+    progress: Option<(f64, f64)>,
+    /// The gripper's position at the last step, and for how many steps it has not moved (the
+    /// Gripped gate sees it stop).
     last_gripper: Option<f64>,
+    gripper_still_for: u32,
     /// The noise-free grasp and the carry, for a regrasp when the cube's pose is not known.
     clean_grasp: TaskPose,
+    #[cfg(test)]
+    noisy_grasp: Vector3<f64>,
     carry: Carry,
     table_z: f64,
     regrasps: u32,
@@ -222,8 +233,8 @@ impl Plan {
         };
         let grasp_height = Vector3::new(cube.x, cube.y, config.table_z + GRASP_ABOVE_TABLE);
         let unreachable = PlanError::Unreachable([cube.x, cube.y, cube.z]);
-        let grasp = grasp_pose(grasp_height + noise(rng), yaw).ok_or(unreachable.clone())?;
-        let clean_grasp = grasp_pose(grasp_height, yaw).ok_or(unreachable)?;
+        let grasp = grasp_pose(grasp_height + noise(rng), yaw).ok_or(unreachable)?;
+        let clean_grasp = grasp_pose(grasp_height, yaw).unwrap_or(grasp);
         let above = |position: Vector3<f64>, height: f64| {
             Vector3::new(position.x, position.y, config.table_z + height)
         };
@@ -246,8 +257,12 @@ impl Plan {
             clock: 0.0,
             next_gate: 0,
             waited: 0.0,
+            progress: None,
             last_gripper: None,
+            gripper_still_for: 0,
             clean_grasp,
+            #[cfg(test)]
+            noisy_grasp: grasp.position,
             carry,
             table_z: config.table_z,
             regrasps: 0,
@@ -255,12 +270,12 @@ impl Plan {
             gripper_closed: config.gripper_closed,
             slowness: config.slowness,
         };
-        plan.waypoints = plan.pick_and_place(grasp, 1.6, Gate::Grasp);
+        plan.waypoints = plan.pick_and_place(grasp, 1.6);
         Ok(plan)
     }
 
     /// From wherever the arm is: above the grasp, down to it, close, lift, carry, release.
-    fn pick_and_place(&self, grasp: TaskPose, approach_s: f64, grasp_gate: Gate) -> Vec<Waypoint> {
+    fn pick_and_place(&self, grasp: TaskPose, approach_s: f64) -> Vec<Waypoint> {
         let (open, closed) = (self.gripper_open, self.gripper_closed);
         let waypoint = |pose: TaskPose, gripper: f64, duration: f64, gate: Gate| Waypoint {
             pose,
@@ -275,7 +290,7 @@ impl Plan {
         let carry = self.carry;
         vec![
             waypoint(approach, open, approach_s, Gate::None),
-            waypoint(grasp, open, 1.0, grasp_gate),
+            waypoint(grasp, open, 1.0, Gate::Grasp),
             waypoint(grasp, open, 0.2, Gate::None),
             waypoint(grasp, closed, 0.6, Gate::Gripped),
             waypoint(carry.lifted, closed, 1.0, Gate::None),
@@ -302,6 +317,11 @@ impl Plan {
     /// How many times the plan went back up to grasp again.
     pub fn regrasps(&self) -> u32 {
         self.regrasps
+    }
+
+    #[cfg(test)]
+    fn grasp_was_noisy(&self) -> bool {
+        self.noisy_grasp != self.clean_grasp.position
     }
 
     /// Where the grasp point and gripper should be `t` seconds into the plan (smooth in and out of
@@ -337,12 +357,19 @@ impl Plan {
         config: &ExpertConfig,
         rng: &mut impl Rng,
     ) -> JointPositions {
+        let gripper = measured[JOINT_COUNT - 1];
+        let moved = self
+            .last_gripper
+            .is_none_or(|last| (gripper - last).abs() >= GRIPPER_STILL);
+        self.gripper_still_for = if moved { 0 } else { self.gripper_still_for + 1 };
+        self.last_gripper = Some(gripper);
         self.advance(dt, measured, cube);
-        self.last_gripper = Some(measured[JOINT_COUNT - 1]);
         self.targets_at_clock(config, rng)
     }
 
     fn advance(&mut self, dt: f64, measured: &JointPositions, cube: Option<(Vector3<f64>, f64)>) {
+        // A stall or a jump of the caller's clock is not time the arm had to follow the plan.
+        let dt = dt.clamp(0.0, MAX_STEP_SECONDS);
         let gate = (self.next_gate..self.waypoints.len())
             .find(|&index| self.waypoints[index].gate != Gate::None);
         let Some(index) = gate else {
@@ -354,8 +381,9 @@ impl Plan {
             self.clock += dt;
             return;
         }
+        // Only the time past the gate is waiting: before it, the arm was still being led there.
+        self.waited += self.clock + dt - gate_at;
         self.clock = gate_at;
-        self.waited += dt;
         let waypoint = self.waypoints[index];
         let arm: ArmPositions = std::array::from_fn(|joint| measured[joint]);
         let reached = || {
@@ -368,31 +396,48 @@ impl Plan {
             Gate::None => true,
             Gate::Reached => reached(),
             Gate::Grasp => {
-                if !reached() && self.waited >= BLOCKED_AFTER && can_regrasp {
+                let distance =
+                    (kinematics::task_pose(&arm).position - waypoint.pose.position).norm();
+                if self.stalled(distance) && distance >= REACHED_TOLERANCE && can_regrasp {
                     self.regrasp(measured, cube);
                     return;
                 }
                 reached()
             }
             Gate::Gripped => {
-                let still = self
-                    .last_gripper
-                    .is_some_and(|last| (gripper - last).abs() < GRIPPER_STILL);
-                if still && gripper < self.gripper_closed + EMPTY_GRIP && can_regrasp {
+                // Closed past where the cube would have stopped the jaws: they hold nothing.
+                if gripper < self.gripper_closed + EMPTY_GRIP && can_regrasp {
                     self.regrasp(measured, cube);
                     return;
                 }
-                still
+                self.gripper_still_for >= GRIPPER_STILL_PERIODS
             }
         };
         if open || self.waited >= GATE_TIMEOUT {
             self.next_gate = index + 1;
             self.waited = 0.0;
+            self.progress = None;
         }
     }
 
-    /// Starts again from the arm where it is: up above the cube's grasp (where `cube` says it is
-    /// now, else where it was planned), without the noise, and down to it.
+    /// Whether the grasp point, `distance` from the gate's pose, got no nearer over the last
+    /// [`BLOCKED_AFTER`] seconds of waiting (a slow arm still gets nearer; a blocked one does not).
+    fn stalled(&mut self, distance: f64) -> bool {
+        match self.progress {
+            None => {
+                self.progress = Some((self.waited, distance));
+                false
+            }
+            Some((since, then)) if self.waited - since >= BLOCKED_AFTER => {
+                self.progress = Some((self.waited, distance));
+                then - distance < STALLED_PROGRESS
+            }
+            Some(_) => false,
+        }
+    }
+
+    /// Starts again from the arm where it is: straight up, over to above the cube's grasp (where
+    /// `cube` says it is now, else where it was planned) without the noise, and down to it.
     fn regrasp(&mut self, measured: &JointPositions, cube: Option<(Vector3<f64>, f64)>) {
         let arm: ArmPositions = std::array::from_fn(|joint| measured[joint]);
         let grasp = cube
@@ -408,17 +453,35 @@ impl Plan {
             grasp.position.y,
             self.table_z + CARRY_ABOVE_TABLE,
         ));
+        let here = kinematics::task_pose(&arm);
         self.start = Waypoint {
-            pose: kinematics::task_pose(&arm),
+            pose: here,
             gripper: measured[JOINT_COUNT - 1],
             duration: 0.0,
             gate: Gate::None,
         };
-        self.waypoints = self.pick_and_place(grasp, 0.8, Gate::Grasp);
+        // Straight up first, opening: a sideways move at grasp height could knock the cube again.
+        let up = TaskPose {
+            position: Vector3::new(
+                here.position.x,
+                here.position.y,
+                self.table_z + GRASP_ABOVE_TABLE + APPROACH_ABOVE_CUBE,
+            ),
+            ..here
+        };
+        self.waypoints = std::iter::once(Waypoint {
+            pose: up,
+            gripper: self.gripper_open,
+            duration: 0.5 * self.slowness,
+            gate: Gate::None,
+        })
+        .chain(self.pick_and_place(grasp, 0.8))
+        .collect();
         self.seed = arm;
         self.clock = 0.0;
         self.next_gate = 0;
         self.waited = 0.0;
+        self.progress = None;
         self.regrasps += 1;
     }
 
@@ -480,240 +543,4 @@ mod rand_distr_free {
 }
 
 #[cfg(test)]
-mod tests {
-    use super::*;
-    use rand::SeedableRng;
-
-    pub fn sim_config() -> ExpertConfig {
-        ExpertConfig {
-            bin: Vector3::new(0.10, -0.22, 0.02),
-            table_z: 0.0,
-            gripper_open: 0.9,
-            gripper_closed: -0.17,
-            waypoint_noise: 0.0,
-            action_noise: 0.0,
-            slowness: 1.0,
-        }
-    }
-
-    const PERIOD: f64 = 1.0 / 30.0;
-    /// Where the gripper stops closed on the cube, rad.
-    const HOLDING: f64 = 0.19;
-
-    /// Steps the plan `seconds` with an arm that follows its targets exactly (the gripper stopped
-    /// by the cube); the last targets.
-    fn play(
-        plan: &mut Plan,
-        seconds: f64,
-        config: &ExpertConfig,
-        rng: &mut impl Rng,
-        arm: &mut JointPositions,
-    ) -> JointPositions {
-        for _ in 0..(seconds / PERIOD).round() as usize {
-            *arm = plan.step(PERIOD, arm, None, config, rng);
-            arm[5] = arm[5].max(HOLDING);
-        }
-        *arm
-    }
-
-    #[test]
-    fn the_jaws_close_across_two_faces_of_the_cube() {
-        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(1);
-        for (x, y, yaw) in [(0.23, -0.05, 0.0), (0.19, 0.07, 0.6), (0.27, -0.07, -0.4)] {
-            let cube = Vector3::new(x, y, 0.015);
-            let mut plan = Plan::new(&[0.0; 6], cube, yaw, &sim_config(), &mut rng).unwrap();
-            // At the grasp (after approach and descent), the grasp point is on the cube ...
-            let mut arm = [0.0; 6];
-            let targets = play(
-                &mut plan,
-                1.6 + 1.0 + 0.1,
-                &sim_config(),
-                &mut rng,
-                &mut arm,
-            );
-            let arm: ArmPositions = std::array::from_fn(|j| targets[j]);
-            let frame = kinematics::grasp_frame(&arm);
-            let at = frame.translation.vector;
-            let off = at - Vector3::new(x, y, GRASP_ABOVE_TABLE);
-            assert!((off.norm() - JAW_CLEARANCE).abs() < 1e-3, "{at:?}");
-            // ... pointing down, with the jaw axis along a face normal of the cube.
-            let approach = frame.rotation * -Vector3::z();
-            assert!(approach.z < -0.99, "{approach:?}");
-            let jaw = frame.rotation * Vector3::x();
-            let misalignment = kinematics::wrap_angle(4.0 * (jaw.y.atan2(jaw.x) - yaw)) / 4.0;
-            assert!(
-                misalignment.abs() < 0.03,
-                "jaw off the faces by {misalignment} rad"
-            );
-            assert_eq!(targets[5], 0.9);
-        }
-    }
-
-    #[test]
-    fn the_plan_ends_open_over_the_bin_inside_the_limits() {
-        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(2);
-        let config = ExpertConfig {
-            waypoint_noise: 0.005,
-            action_noise: 0.01,
-            ..sim_config()
-        };
-        let mut plan = Plan::new(
-            &[0.0; 6],
-            Vector3::new(0.21, 0.03, 0.015),
-            0.3,
-            &config,
-            &mut rng,
-        )
-        .unwrap();
-        let mut arm = [0.0; 6];
-        let mut t = 0.0;
-        while !plan.finished() {
-            arm = plan.step(PERIOD, &arm, None, &config, &mut rng);
-            arm[5] = arm[5].max(HOLDING);
-            for (joint, value) in arm.iter().enumerate() {
-                assert!(
-                    JOINT_LIMITS[joint].contains(*value),
-                    "t={t}: {joint}={value}"
-                );
-            }
-            t += PERIOD;
-            assert!(
-                t < plan.duration() + 3.0 * GATE_TIMEOUT,
-                "the plan never ends"
-            );
-        }
-        let quiet = sim_config();
-        let end = play(&mut plan, 1.0, &quiet, &mut rng, &mut arm);
-        let arm: ArmPositions = std::array::from_fn(|j| end[j]);
-        let over = kinematics::task_pose(&arm).position;
-        assert!(
-            (over.xy() - Vector3::new(0.10, -0.22, 0.0).xy()).norm() < 0.02,
-            "{over:?}"
-        );
-        assert!(end[5] > 0.8);
-    }
-
-    #[test]
-    fn the_gripper_closes_only_once_a_lagging_arm_has_reached_the_grasp() {
-        let config = sim_config();
-        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(3);
-        let cube = Vector3::new(0.22, 0.02, 0.015);
-        let mut plan = Plan::new(&[0.0; 6], cube, 0.2, &config, &mut rng).unwrap();
-        // An arm that covers a third of the way to its targets each period (ramped servos).
-        let mut arm = [0.0; 6];
-        let mut closing_started_at_grasp = None;
-        let mut opened = false;
-        for _ in 0..600 {
-            let targets = plan.step(PERIOD, &arm, None, &config, &mut rng);
-            opened |= targets[5] >= GRIPPER_OPEN - 1e-9;
-            if opened && targets[5] < GRIPPER_OPEN - 0.01 && closing_started_at_grasp.is_none() {
-                let at: ArmPositions = std::array::from_fn(|j| arm[j]);
-                let grasp = plan.clean_grasp.position;
-                closing_started_at_grasp =
-                    Some((kinematics::task_pose(&at).position - grasp).norm());
-            }
-            for joint in 0..6 {
-                arm[joint] += (targets[joint] - arm[joint]) / 3.0;
-            }
-            arm[5] = arm[5].max(HOLDING);
-            if plan.finished() {
-                break;
-            }
-        }
-        assert!(plan.finished() && plan.regrasps() == 0);
-        let off = closing_started_at_grasp.expect("the gripper never closed");
-        assert!(
-            off < REACHED_TOLERANCE,
-            "the jaws began closing {off} m from the grasp"
-        );
-    }
-
-    #[test]
-    fn a_grasp_blocked_by_the_cube_is_retried_from_above_without_the_noise() {
-        let config = sim_config();
-        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(4);
-        let cube = Vector3::new(0.24, -0.03, 0.015);
-        let mut plan = Plan::new(&[0.0; 6], cube, 0.0, &config, &mut rng).unwrap();
-        let mut arm = [0.0; 6];
-        // The arm follows, but a jaw sits on the cube: it stops 15 mm above the grasp.
-        let floor = plan.clean_grasp.position.z + 0.015;
-        let mut lowest_after_retry = f64::INFINITY;
-        let mut opened = false;
-        for _ in 0..400 {
-            let targets = plan.step(PERIOD, &arm, None, &config, &mut rng);
-            opened |= targets[5] >= GRIPPER_OPEN - 1e-9;
-            let regrasped = plan.regrasps() > 0;
-            assert!(
-                !opened || targets[5] > 0.8 || regrasped,
-                "closed on a blocked grasp"
-            );
-            let reached: ArmPositions = std::array::from_fn(|j| targets[j]);
-            let blocked = !regrasped && kinematics::task_pose(&reached).position.z < floor;
-            if !blocked {
-                arm = targets;
-                arm[5] = arm[5].max(HOLDING);
-            }
-            if regrasped {
-                let at: ArmPositions = std::array::from_fn(|j| arm[j]);
-                lowest_after_retry = lowest_after_retry.min(kinematics::task_pose(&at).position.z);
-            }
-            if plan.finished() {
-                break;
-            }
-        }
-        assert!(plan.regrasps() == 1 && plan.finished());
-        assert!((lowest_after_retry - plan.clean_grasp.position.z).abs() < 1e-3);
-    }
-
-    #[test]
-    fn a_grasp_that_closed_on_nothing_goes_back_for_the_cube_where_it_lies_now() {
-        let config = sim_config();
-        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(5);
-        let planned = Vector3::new(0.22, 0.0, 0.015);
-        let moved = Vector3::new(0.25, 0.03, 0.015);
-        let mut plan = Plan::new(&[0.0; 6], planned, 0.0, &config, &mut rng).unwrap();
-        let mut arm = [0.0; 6];
-        let mut lowest: Option<Vector3<f64>> = None;
-        for _ in 0..600 {
-            // The jaws close on nothing (the cube was knocked to `moved`), once.
-            arm = plan.step(PERIOD, &arm, Some((moved, 0.0)), &config, &mut rng);
-            if plan.regrasps() > 0 {
-                let at: ArmPositions = std::array::from_fn(|j| arm[j]);
-                let point = kinematics::task_pose(&at).position;
-                if lowest.is_none_or(|low| point.z < low.z) {
-                    lowest = Some(point);
-                }
-                // Holding the cube this time: the jaws stop short of closed.
-                arm[5] = arm[5].max(HOLDING);
-            }
-            if plan.finished() {
-                break;
-            }
-        }
-        assert_eq!(plan.regrasps(), 1);
-        assert!(plan.finished());
-        let lowest = lowest.unwrap();
-        let off = (lowest.xy() - moved.xy()).norm();
-        assert!(
-            off < JAW_CLEARANCE + 2e-3,
-            "regrasped {off} m from the cube"
-        );
-    }
-
-    #[test]
-    fn cube_yaw_reads_a_flat_cubes_turn() {
-        let half = 0.3_f64 / 2.0;
-        assert!((cube_yaw([half.cos(), 0.0, 0.0, half.sin()]) - 0.3).abs() < 1e-12);
-        assert_eq!(cube_yaw([1.0, 0.0, 0.0, 0.0]), 0.0);
-    }
-
-    #[test]
-    fn grasp_roll_picks_the_face_pair_needing_the_least_roll() {
-        for heading in [-0.5, 0.0, 0.4] {
-            for yaw in [-1.0, 0.0, 0.7, 2.5] {
-                let roll = grasp_roll(heading, yaw);
-                assert!(roll.abs() <= FRAC_PI_2 / 2.0 + 1e-12, "{roll}");
-            }
-        }
-    }
-}
+mod tests;

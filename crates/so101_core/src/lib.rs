@@ -7,6 +7,7 @@ pub mod bag_read;
 pub mod cli_values;
 pub mod command;
 pub mod contract;
+pub mod ee_action;
 pub mod episode_bag;
 pub mod expert;
 pub mod fuzzing;

@@ -13,6 +13,9 @@ JOINT_LIMITS = (
     (-2.7438, 2.8412),
     (-0.1745, 1.7453),
 )
+# An end-effector action or state (so101_core::ee_action): the grasp point in the base
+# frame (m), the approach pitch and the jaws' roll (rad), the gripper's joint (rad).
+EE_NAMES = ("x", "y", "z", "pitch", "roll", "gripper")
 CAMERA_NAMES = ("top", "front", "wrist")
 CAMERAS_ON_THE_ARM = ("wrist",)
 # The arm's base body: its frame is the base frame cameras are placed in.

@@ -6,7 +6,8 @@ from the settled cube's pose, a grasp from above, a lift, a carry over the bin a
 timed waypoints turned into joint targets by the shared IK, each target moved at most `max_step`
 rad per period. The plan waits at its gates for the arm it observes (the grasp reached, the
 gripper closed, the arm over the bin) and goes back up to grasp again (at most twice) when a jaw
-lands on the cube or the jaws close on nothing (at the cube's pose of the observation). The noise options are teleop_node's (--waypoint-noise, --action-noise).
+lands on the cube or the jaws close on nothing (at the cube's pose of the observation). The noise
+options are teleop_node's (--waypoint-noise, --action-noise).
 
     env = gym.make("so101/CubeToBin-v0")
     expert = ExpertPolicy(waypoint_noise=0.005, action_noise=0.01, seed=1)
@@ -40,7 +41,8 @@ class ExpertPolicy:
 
     def reset(self, observation: dict) -> float:
         """Plans the episode from its first observation (the arm's joints, the cube's pose).
-        Returns the plan's duration (s); ValueError when no grasp reaches the cube."""
+        Returns the plan's duration as timed (s: its gates and regrasps may add to it); ValueError
+        when no grasp reaches the cube."""
         cube = np.asarray(observation["environment_state"], dtype=np.float64)
         self.duration = self._expert.plan(
             np.asarray(observation["agent_pos"], dtype=np.float64), cube[:3].copy(), cube[3:7].copy()

@@ -13,8 +13,6 @@ import os
 from collections.abc import Callable, Sequence
 from concurrent.futures import ProcessPoolExecutor
 
-from .episodes import EpisodeResult
-
 
 def split(seeds: Sequence[int], first_index: int, workers: int) -> list[tuple[int, list[int]]]:
     """`seeds` in at most `workers` contiguous shares of nearly equal size, each with the episode
@@ -38,7 +36,7 @@ def threads_per_worker(workers: int) -> int:
     return max(1, (os.cpu_count() or 1) // workers)
 
 
-def run_shares(job: Callable, jobs: list[tuple], workers: int) -> list[EpisodeResult]:
+def run_shares(job: Callable, jobs: list[tuple], workers: int) -> list:
     """`job(*arguments)` for each of `jobs` on `workers` processes (a picklable top-level
     function); every job's results, in the jobs' order."""
     context = multiprocessing.get_context("spawn")

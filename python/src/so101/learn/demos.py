@@ -178,7 +178,8 @@ def run_inprocess(args, output: Path) -> int:
     kept = [r for r in results if r.kept]
     successes = sum(r.success for r in results)
     print(
-        f"\nSummary: {len(results)} demonstration(s) played, {successes} successful, {len(kept)} kept "
+        f"\nSummary: {len(results)} demonstration(s) played, {successes} successful "
+        f"({sum(r.regrasps > 0 for r in results)} after a regrasp), {len(kept)} kept "
         f"({sum(r.frames for r in kept)} frames), in {seconds:.0f} s ({60 * len(results) / max(seconds, 1e-9):.1f}/min)"
     )
     if not kept:

@@ -16,7 +16,7 @@ aggregate_datasets joins them in episode order, and so101-dataset-check checks t
 
 from __future__ import annotations
 
-import json
+import argparse
 import shutil
 from dataclasses import dataclass
 from pathlib import Path
@@ -24,7 +24,7 @@ from pathlib import Path
 import numpy as np
 
 from .. import contract
-from ..dataset.convert import MIN_VIDEO_WIDTH, ROBOT_TYPE, SIMULATION_FILE, features_for, image_size
+from ..dataset.convert import MIN_VIDEO_WIDTH, ROBOT_TYPE, features_for, image_size, write_simulation_settings
 from ..evaluate.parallel import run_shares, split
 from ..units import lerobot_from_radians
 
@@ -41,7 +41,10 @@ def camera_sizes(text: str) -> dict[str, tuple[int, int]]:
             raise ValueError(f"--cameras {text!r}: {name!r} is none of {', '.join(contract.CAMERA_NAMES)}")
         if not size:
             raise ValueError(f"--cameras {text!r}: name each camera's size in-process, e.g. {name}:96x72")
-        width, height = image_size(size)
+        try:
+            width, height = image_size(size)
+        except argparse.ArgumentTypeError as error:
+            raise ValueError(f"--cameras {text!r}: {error}") from None
         if width < MIN_VIDEO_WIDTH:
             raise ValueError(
                 f"--cameras {text!r}: {name} narrower than {MIN_VIDEO_WIDTH} px, which the video encoder cannot take"
@@ -78,6 +81,12 @@ class Recorded:
     kept: bool
     note: str
     simulation: dict | None
+    regrasps: int = 0
+
+    @property
+    def label(self) -> str:
+        """The episode's name, as the stack's path names its bag (episode_0001 is the first)."""
+        return f"{contract.EPISODE_DEFAULT_PREFIX}_{self.episode + 1:04d}"
 
 
 def expert_seed(seed: int, episode: int) -> int:
@@ -96,7 +105,8 @@ def play_episode(env, expert, observation: dict, reward: float, success: bool, l
     judged_from = succeeded_at = None
     for step in range(limit):
         now = step * period
-        if judged_from is None:
+        judging = judged_from is not None  # teleop_node judges from the period after the plan's end
+        if not judging:
             action = expert(observation)
             if expert.done:
                 judged_from = now
@@ -106,7 +116,7 @@ def play_episode(env, expert, observation: dict, reward: float, success: bool, l
         frames["success"].append(success)
         frames["cube"].append(np.asarray(observation["environment_state"], dtype=np.float32))
         frames["images"].append(observation.get("pixels", {}))
-        if judged_from is not None:
+        if judging:
             if success and succeeded_at is None:
                 succeeded_at = now
             if succeeded_at is not None and now >= succeeded_at + so101_native.EXPERT_SUCCESS_SHOWN_SECONDS - 1e-9:
@@ -172,7 +182,7 @@ def record_share(options: Options, first: int, count: int, root: str) -> list[Re
                 )
             write_episode(dataset, frames, success, task_text, options.environment_state)
         note = "cube in the bin" if success else "the cube is not in the bin"
-        recorded.append(Recorded(episode, success, len(frames["state"]), kept, note, settings))
+        recorded.append(Recorded(episode, success, len(frames["state"]), kept, note, settings, expert.regrasps))
     if dataset is not None:
         dataset.finalize()
     return recorded
@@ -201,30 +211,35 @@ def write_episode(dataset, frames: dict, success: bool, task: str, environment_s
 
 def record(options: Options, episodes: int, workers: int, output: Path) -> list[Recorded]:
     """`episodes` demonstrations on `workers` processes into the dataset at `output` (which must
-    not exist); every episode's record, in order."""
+    not exist); every episode's record, in order. Nothing is left at `output` unless all of it
+    was written."""
     shares = [(first, len(seeds)) for first, seeds in split(list(range(episodes)), 0, workers)]
-    shards = output.parent / f".{output.name}-shards"
-    if shards.exists():
-        shutil.rmtree(shards)
-    shards.mkdir(parents=True)
-    jobs = [(options, first, count, str(shards / f"{k:03d}")) for k, (first, count) in enumerate(shares)]
-    results = record_share(*jobs[0]) if len(jobs) == 1 else run_shares(record_share, jobs, len(jobs))
-    roots = [Path(root) for _, _, _, root in jobs if (Path(root) / "meta" / "info.json").exists()]
-    if roots:
-        join(options.repo_id, roots, output)
-        simulation = [
-            {"episode_index": index, "bag": f"inprocess episode {r.episode} of seed {options.seed}", "simulation": r.simulation}
-            for index, r in enumerate(r for r in results if r.kept)
-        ]
-        (output / SIMULATION_FILE).write_text(json.dumps({"episodes": simulation}, indent=1))
-    shutil.rmtree(shards)
+    work = output.parent / f".{output.name}-partial"
+    if work.exists():
+        shutil.rmtree(work)
+    work.mkdir(parents=True)
+    try:
+        jobs = [(options, first, count, str(work / f"share-{k:03d}")) for k, (first, count) in enumerate(shares)]
+        results = record_share(*jobs[0]) if len(jobs) == 1 else run_shares(record_share, jobs, len(jobs))
+        roots = [Path(root) for _, _, _, root in jobs if (Path(root) / "meta" / "info.json").exists()]
+        if roots:
+            joined = work / "joined"
+            join(options.repo_id, roots, joined)
+            kept = [r for r in results if r.kept]
+            write_simulation_settings(
+                joined,
+                [{"episode_index": index, "bag": r.label, "simulation": r.simulation} for index, r in enumerate(kept)],
+            )
+            joined.rename(output)
+    finally:
+        shutil.rmtree(work, ignore_errors=True)
     return results
 
 
 def join(repo_id: str, roots: list[Path], output: Path) -> None:
     """The shards as one dataset at `output`, in their order (LeRobot's own aggregation)."""
     if len(roots) == 1:
-        shutil.move(str(roots[0]), str(output))
+        roots[0].rename(output)
         return
     from lerobot.datasets.aggregate import aggregate_datasets
 

@@ -256,6 +256,8 @@ def launcher(args) -> list[str]:
         # torch.distributed's launcher for either: lerobot-train's Accelerator takes the CPU (gloo)
         # itself when the policy's device is the CPU.
         "--multi_gpu",
+        # accelerate gives each process one thread unless told: on the CPU they share the cores.
+        f"--num_cpu_threads_per_process={max(1, (os.cpu_count() or 1) // args.num_processes)}",
         "--num_machines=1",
         "--mixed_precision=no",
         "--dynamo_backend=no",
