@@ -128,9 +128,9 @@ def play_episode(env, expert, observation: dict, reward: float, success: bool, l
     return frames, False
 
 
-def record_share(options: Options, first: int, count: int, root: str) -> list[Recorded]:
+def record_share(options: Options, first: int, count: int, root: str, workers: int = 1) -> list[Recorded]:
     """Records episodes first .. first+count-1 of the --seed sequence into a dataset at `root`
-    (created when an episode is kept). Runs in a worker process."""
+    (created when an episode is kept). Runs in a worker process, one of `workers`."""
     import datasets
     from lerobot.datasets.lerobot_dataset import LeRobotDataset
 
@@ -180,7 +180,9 @@ def record_share(options: Options, first: int, count: int, root: str) -> list[Re
                     robot_type=ROBOT_TYPE,
                     use_videos=True,
                 )
-            write_episode(dataset, frames, success, task_text, options.environment_state)
+            # One encoder process per camera and episode is LeRobot's default; beside other
+            # workers it oversubscribes the cores (2 workers with 3 cameras: 3x one's time).
+            write_episode(dataset, frames, success, task_text, options.environment_state, parallel_encoding=workers == 1)
         note = "cube in the bin" if success else "the cube is not in the bin"
         recorded.append(Recorded(episode, success, len(frames["state"]), kept, note, settings, expert.regrasps))
     if dataset is not None:
@@ -188,7 +190,7 @@ def record_share(options: Options, first: int, count: int, root: str) -> list[Re
     return recorded
 
 
-def write_episode(dataset, frames: dict, success: bool, task: str, environment_state: bool) -> None:
+def write_episode(dataset, frames: dict, success: bool, task: str, environment_state: bool, parallel_encoding: bool) -> None:
     state = lerobot_from_radians(np.stack(frames["state"])).astype(np.float32)
     action = lerobot_from_radians(np.stack(frames["action"])).astype(np.float32)
     verdicts = np.array(frames["success"], dtype=bool)
@@ -206,7 +208,7 @@ def write_episode(dataset, frames: dict, success: bool, task: str, environment_s
         for name, image in frames["images"][k].items():
             frame[f"observation.images.{name}"] = image
         dataset.add_frame(frame)
-    dataset.save_episode()
+    dataset.save_episode(parallel_encoding=parallel_encoding)
 
 
 def record(options: Options, episodes: int, workers: int, output: Path) -> list[Recorded]:
@@ -219,9 +221,9 @@ def record(options: Options, episodes: int, workers: int, output: Path) -> list[
         shutil.rmtree(work)
     work.mkdir(parents=True)
     try:
-        jobs = [(options, first, count, str(work / f"share-{k:03d}")) for k, (first, count) in enumerate(shares)]
+        jobs = [(options, first, count, str(work / f"share-{k:03d}"), len(shares)) for k, (first, count) in enumerate(shares)]
         results = record_share(*jobs[0]) if len(jobs) == 1 else run_shares(record_share, jobs, len(jobs))
-        roots = [Path(root) for _, _, _, root in jobs if (Path(root) / "meta" / "info.json").exists()]
+        roots = [Path(job[3]) for job in jobs if (Path(job[3]) / "meta" / "info.json").exists()]
         if roots:
             joined = work / "joined"
             join(options.repo_id, roots, joined)
