@@ -252,18 +252,18 @@ fn grasp_roll_picks_the_face_pair_needing_the_least_roll() {
     }
 }
 
+/// The quiet expert's plan, from home, for a cube in front of the arm.
+fn plan_from_home(seed: u64) -> (ExpertConfig, rand_chacha::ChaCha8Rng, Plan) {
+    let config = sim_config();
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
+    let cube = Vector3::new(0.22, 0.0, 0.015);
+    let plan = Plan::new(&[0.0; 6], cube, 0.0, &config, &mut rng).unwrap();
+    (config, rng, plan)
+}
+
 #[test]
 fn an_arm_that_never_moves_ends_the_plan_after_two_regrasps() {
-    let config = sim_config();
-    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(6);
-    let mut plan = Plan::new(
-        &[0.0; 6],
-        Vector3::new(0.22, 0.0, 0.015),
-        0.0,
-        &config,
-        &mut rng,
-    )
-    .unwrap();
+    let (config, mut rng, mut plan) = plan_from_home(6);
     let still = [0.0; 6];
     let mut steps = 0;
     while !plan.finished() {
@@ -279,16 +279,7 @@ fn an_arm_that_never_moves_ends_the_plan_after_two_regrasps() {
 
 #[test]
 fn a_stall_of_the_callers_clock_is_neither_followed_nor_counted_as_waiting() {
-    let config = sim_config();
-    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(7);
-    let mut plan = Plan::new(
-        &[0.0; 6],
-        Vector3::new(0.22, 0.0, 0.015),
-        0.0,
-        &config,
-        &mut rng,
-    )
-    .unwrap();
+    let (config, mut rng, mut plan) = plan_from_home(7);
     let mut arm = [0.0; 6];
     play(&mut plan, 2.4, &config, &mut rng, &mut arm);
     // Two seconds in one call, just before the grasp gate: the plan moves one capped step.
