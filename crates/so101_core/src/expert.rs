@@ -386,23 +386,20 @@ impl Plan {
         self.clock = gate_at;
         let waypoint = self.waypoints[index];
         let arm: ArmPositions = std::array::from_fn(|joint| measured[joint]);
-        let reached = || {
-            (kinematics::task_pose(&arm).position - waypoint.pose.position).norm()
-                < REACHED_TOLERANCE
-        };
+        // How far the measured grasp point is from the gate's pose.
+        let distance = (kinematics::task_pose(&arm).position - waypoint.pose.position).norm();
+        let reached = distance < REACHED_TOLERANCE;
         let gripper = measured[JOINT_COUNT - 1];
         let can_regrasp = self.regrasps < MAX_REGRASPS;
         let open = match waypoint.gate {
             Gate::None => true,
-            Gate::Reached => reached(),
+            Gate::Reached => reached,
             Gate::Grasp => {
-                let distance =
-                    (kinematics::task_pose(&arm).position - waypoint.pose.position).norm();
-                if self.stalled(distance) && distance >= REACHED_TOLERANCE && can_regrasp {
+                if self.stalled(distance) && !reached && can_regrasp {
                     self.regrasp(measured, cube);
                     return;
                 }
-                reached()
+                reached
             }
             Gate::Gripped => {
                 // Closed past where the cube would have stopped the jaws: they hold nothing.
