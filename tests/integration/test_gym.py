@@ -1,6 +1,7 @@
 """The Gymnasium environments' ROS backend (so101_sim_node in lockstep, --step-on-command, driven
 through rclpy): gymnasium's own env checker, cameras, and parity with the in-process backend (the
-same seed and actions give the same trajectory over ROS as in-process, to 1e-9, over 600 steps)."""
+same seed and actions give the same trajectory over ROS as in-process, to 1e-9, over 600 steps),
+joint or end-effector actions."""
 
 from __future__ import annotations
 
@@ -97,3 +98,31 @@ def test_with_cameras_each_step_brings_the_frames_of_its_state():
         assert changed.mean() > 0.01, f"only {changed.mean():.3%} of the front view changed"
     finally:
         env.close()
+
+
+def test_end_effector_actions_drive_both_backends_alike():
+    """action_space="ee" on so101_sim_node in lockstep: the same end-effector targets give the
+    in-process trajectory, the clamp reported alike."""
+    import gymnasium as gym
+
+    ros = gym.make("so101:so101/CubeToBin-v0", backend="ros", action_space="ee")
+    local = gym.make("so101/CubeToBin-v0", action_space="ee")
+    try:
+        ros_observation, _ = ros.reset(seed=12)
+        local_observation, _ = local.reset(seed=12)
+        start = local_observation["ee_state"]
+        # Down towards the table and round, then a target out of reach.
+        targets = [start + (k / 30) * np.array([-0.1, 0.08, -0.12, 0.9, 0.5, 0.6]) for k in range(1, 31)]
+        targets.append(targets[-1] + np.array([0.6, 0.0, 0.0, 0.0, 0.0, 0.0]))
+        for step, target in enumerate(targets):
+            ros_observation, _, _, _, ros_info = ros.step(target)
+            local_observation, _, _, _, local_info = local.step(target)
+            difference = np.abs(state_of(ros_observation) - state_of(local_observation)).max()
+            assert difference <= 1e-9, f"step {step}: the backends differ by {difference}"
+            assert ros_info["ee_clamped"] == local_info["ee_clamped"]
+            assert np.array_equal(ros_observation["ee_state"], local_observation["ee_state"])
+        assert local_info["ee_clamped"] and ros_info["ee_clamped"]
+        assert np.abs(local_observation["ee_state"][:3] - start[:3]).max() > 0.1  # it moved
+    finally:
+        ros.close()
+        local.close()

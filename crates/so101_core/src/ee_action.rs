@@ -36,16 +36,20 @@ pub enum EeError {
 }
 
 /// The end-effector state of a joint configuration: forward kinematics of the arm, and the
-/// gripper's joint as it is.
+/// gripper's joint as it is. The roll is continuous over wrist_roll's whole range (about -1.2 to
+/// 4.4 rad), not wrapped at +-pi: the jaws' roll is a fixed offset minus wrist_roll, so a
+/// dataset's roll never jumps by a turn where the wrist crosses the wrap.
 pub fn ee_pose(joints: &JointPositions) -> EePose {
     let arm: ArmPositions = std::array::from_fn(|joint| joints[joint]);
     let pose = kinematics::task_pose(&arm);
+    let wrist_roll = joints[ARM_JOINTS - 1];
+    let roll = kinematics::wrap_angle(pose.roll + wrist_roll) - wrist_roll;
     [
         pose.position.x,
         pose.position.y,
         pose.position.z,
         pose.pitch,
-        pose.roll,
+        roll,
         joints[JOINT_COUNT - 1],
     ]
 }
@@ -86,6 +90,7 @@ pub fn joint_targets(action: &EePose, current: &JointPositions) -> Result<EeStep
 #[cfg(test)]
 mod tests {
     use super::*;
+    use std::f64::consts::PI;
 
     #[test]
     fn a_reachable_pose_round_trips_through_ik_and_forward_kinematics() {
@@ -98,6 +103,30 @@ mod tests {
             assert!((a - b).abs() < 2e-3, "{}: {a} vs {b}", EE_NAMES[coordinate]);
         }
         assert_eq!(step.targets[5], 0.6);
+    }
+
+    #[test]
+    fn the_roll_is_continuous_over_the_wrist_rolls_range() {
+        let range = JOINT_LIMITS[ARM_JOINTS - 1];
+        let rolls: Vec<f64> = (0..=200)
+            .map(|k| {
+                let wrist = range.min + (range.max - range.min) * k as f64 / 200.0;
+                ee_pose(&[0.2, -0.5, 0.8, 1.2, wrist, 0.0])[4]
+            })
+            .collect();
+        for pair in rolls.windows(2) {
+            let step = pair[1] - pair[0];
+            assert!(step < 0.0 && step > -0.05, "{pair:?}");
+        }
+        // And the IK reaches a roll past pi (the wrist near its lower limit).
+        let joints = [0.2, -0.5, 0.8, 1.2, range.min + 0.1, 0.0];
+        let pose = ee_pose(&joints);
+        assert!(pose[4] > PI, "{pose:?}");
+        let step = joint_targets(&pose, &[0.0; 6]).unwrap();
+        assert!(
+            !step.clamped && (step.targets[4] - joints[4]).abs() < 2e-3,
+            "{step:?}"
+        );
     }
 
     #[test]

@@ -1,10 +1,11 @@
 //! `so101_native`: the simulation core (so101_sim) as a Python extension. Worlds step, reset with
 //! a seed, observe and render in-process; a batch steps many worlds in one call across threads;
-//! the scripted expert plans in-process. The GIL is released while the physics or the renderer
+//! the scripted expert plans in-process; end-effector targets become joint targets by the core's IK. The GIL is released while the physics or the renderer
 //! works. so101.envs builds the Gymnasium environments on it.
 
 mod batch;
 mod cameras;
+mod ee;
 mod expert;
 mod options;
 mod sysid;
@@ -25,6 +26,8 @@ fn so101_native(module: &Bound<'_, PyModule>) -> PyResult<()> {
     )?;
     module.add("EXPERT_JUDGE_SECONDS", so101_core::expert::JUDGE_SECONDS)?;
     module.add_function(wrap_pyfunction!(mujoco_version, module)?)?;
+    module.add_function(wrap_pyfunction!(ee::ee_poses, module)?)?;
+    module.add_function(wrap_pyfunction!(ee::ee_joint_targets, module)?)?;
     module.add_function(wrap_pyfunction!(scene_xml, module)?)?;
     module.add_function(wrap_pyfunction!(sysid::servo_params_json, module)?)?;
     module.add_function(wrap_pyfunction!(sysid::fit_servos, module)?)?;

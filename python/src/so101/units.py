@@ -18,13 +18,23 @@ JOINT_LIMITS = np.array(contract.JOINT_LIMITS)
 GRIPPER_CLOSED, GRIPPER_OPEN = contract.JOINT_LIMITS[-1]
 
 
+def gripper_percent(radians):
+    """The gripper's joint (rad) -> its position in its range as 0-100 (LeRobot's RANGE_0_100)."""
+    return (radians - GRIPPER_CLOSED) / (GRIPPER_OPEN - GRIPPER_CLOSED) * 100.0
+
+
+def gripper_radians(percent):
+    """The inverse of gripper_percent."""
+    return GRIPPER_CLOSED + percent / 100.0 * (GRIPPER_OPEN - GRIPPER_CLOSED)
+
+
 def lerobot_from_radians(positions: np.ndarray) -> np.ndarray:
     """[..., 6] radians in contract order -> LeRobot units: degrees for the arm (LeRobot's DEGREES
     mode, the same numbers LeRobot records from a calibrated arm), the gripper's position in its
     range as 0-100 (RANGE_0_100)."""
     positions = np.asarray(positions, dtype=np.float64)
     out = np.degrees(positions)
-    out[..., 5] = (positions[..., 5] - GRIPPER_CLOSED) / (GRIPPER_OPEN - GRIPPER_CLOSED) * 100.0
+    out[..., 5] = gripper_percent(positions[..., 5])
     return out
 
 
@@ -32,7 +42,7 @@ def radians_from_lerobot(values: np.ndarray) -> np.ndarray:
     """The inverse of lerobot_from_radians."""
     values = np.asarray(values, dtype=np.float64)
     out = np.radians(values)
-    out[..., 5] = GRIPPER_CLOSED + values[..., 5] / 100.0 * (GRIPPER_OPEN - GRIPPER_CLOSED)
+    out[..., 5] = gripper_radians(values[..., 5])
     return out
 
 

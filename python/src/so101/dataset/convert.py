@@ -5,7 +5,9 @@ Per frame (docs/lerobot.md): observation.state (the arm's /joint_states), action
 the robot obeyed: /joint_commands and /forward_position_controller/commands validated, clamped and
 merged as the nodes do, so101.dataset.commands), observation.environment_state (the cube's pose from /cube/pose: x y z
 in m and the orientation quaternion w x y z, world frame; --no-environment-state leaves it out),
-observation.images.<camera> (video), next.reward, next.success, and the episode's task. Units are LeRobot's SO-101 conventions (degrees, gripper 0-100) unless
+observation.images.<camera> (video), next.reward, next.success, and the episode's task. With
+--action-space ee the action is the end-effector target the joint command reaches and
+observation.ee_state the arm's end-effector state (so101.dataset.ee_columns). Units are LeRobot's SO-101 conventions (degrees, gripper 0-100) unless
 --units radians. An episode that cannot be converted faithfully (unreadable, a stream missing, a
 camera changing size, malformed metadata, a file that is no MCAP or holds none of the stack's
 topics) is reported and skipped, naming the file and why; the others are converted. A recording
@@ -31,12 +33,15 @@ from pathlib import Path
 import numpy as np
 
 from .. import contract
+from ..ee import EE_FEATURE_NAMES
 from ..messages import rgb_image
 from ..units import FEATURE_NAMES, lerobot_from_radians
 from .bags import BagError, Episode, camera_frames, episode_dirs, read_episode
+from .ee_columns import with_ee_columns
 from .resample import frame_times, gaps, parts_between, sample_and_hold
 
 ROBOT_TYPE = "so_follower"
+EE_STATE = "observation.ee_state"
 # The fewest frames an episode (or a part of one split at a gap) needs to be kept.
 MIN_FRAMES = 2
 log = logging.getLogger("so101.dataset.convert")
@@ -52,6 +57,7 @@ class Frames:
     success: np.ndarray  # [N] bool
     images: dict[str, list]  # per camera, the FrameRef of each frame (bags.camera_frames reads them)
     environment_state: np.ndarray | None  # [N, 7] float32 cube pose, or None
+    ee_state: np.ndarray | None = None  # [N, 6] float32 end-effector state (--action-space ee), or None
 
 
 def frames_of(episode: Episode, fps: float, units: str, environment_state: bool = True) -> Frames:
@@ -151,10 +157,15 @@ def episode_parts(episode: Episode, max_gap: float, environment_state: bool) -> 
 ENVIRONMENT_STATE_NAMES = ["cube.x", "cube.y", "cube.z", "cube.qw", "cube.qx", "cube.qy", "cube.qz"]
 
 
-def features_for(cameras: dict[str, tuple[int, int]], use_videos: bool, environment_state: bool = False) -> dict:
+def features_for(
+    cameras: dict[str, tuple[int, int]], use_videos: bool, environment_state: bool = False, action_space: str = "joint"
+) -> dict:
+    """The dataset's features; with action_space "ee", the action is the end-effector target and
+    observation.ee_state the end-effector state, both named EE_FEATURE_NAMES (so101.ee)."""
+    ee = action_space == "ee"
     features = {
         "observation.state": {"dtype": "float32", "shape": (6,), "names": FEATURE_NAMES},
-        "action": {"dtype": "float32", "shape": (6,), "names": FEATURE_NAMES},
+        "action": {"dtype": "float32", "shape": (6,), "names": EE_FEATURE_NAMES if ee else FEATURE_NAMES},
         "next.reward": {"dtype": "float32", "shape": (1,), "names": None},
         "next.success": {"dtype": "bool", "shape": (1,), "names": None},
     }
@@ -164,6 +175,8 @@ def features_for(cameras: dict[str, tuple[int, int]], use_videos: bool, environm
             "shape": (len(ENVIRONMENT_STATE_NAMES),),
             "names": ENVIRONMENT_STATE_NAMES,
         }
+    if ee:
+        features[EE_STATE] = {"dtype": "float32", "shape": (len(EE_FEATURE_NAMES),), "names": EE_FEATURE_NAMES}
     for name, (height, width) in cameras.items():
         features[f"observation.images.{name}"] = {
             "dtype": "video" if use_videos else "image",
@@ -239,6 +252,8 @@ def write_part(dataset, frames: Frames, task: str, images, image_size, label: st
             }
             if frames.environment_state is not None:
                 frame["observation.environment_state"] = frames.environment_state[k]
+            if frames.ee_state is not None:
+                frame[EE_STATE] = frames.ee_state[k]
             for name, message in messages.items():
                 ordinal = frames.images[name][k].ordinal
                 if decoded.get(name, (None,))[0] != ordinal:
@@ -297,6 +312,7 @@ def convert(args) -> int:
     started = time.monotonic()
     notes: list[str] = []
     simulation: list[dict] = []  # per dataset episode: what the sim simulated it with
+    ee_targets = ee_clamped = 0  # --action-space ee: end-effector actions, and those out of reach
     # None: decided by the first episode (a real arm records no /cube/pose: then none has it).
     environment_state: bool | None = False if args.no_environment_state else None
     for path in tqdm(paths, desc="episodes", unit="episode", disable=args.quiet):
@@ -336,6 +352,10 @@ def convert(args) -> int:
                     frames, reason = None, str(error).removeprefix(f"{path.name}: ")
                 else:
                     reason = None if len(frames.state) >= MIN_FRAMES else f"{len(frames.state)} frame(s)"
+                    if not reason and args.action_space == "ee":
+                        frames, clamped = with_ee_columns(frames, args.units)
+                        ee_clamped += clamped
+                        ee_targets += len(frames.action)
                 if reason:
                     note = f"{label}: left out ({reason}; at least {MIN_FRAMES} frames needed)"
                     log.warning("%s", note)
@@ -368,7 +388,9 @@ def convert(args) -> int:
                 dataset = LeRobotDataset.create(
                     repo_id=args.repo_id,
                     fps=args.fps,
-                    features=features_for(shapes, not args.no_videos, environment_state=environment_state),
+                    features=features_for(
+                        shapes, not args.no_videos, environment_state=environment_state, action_space=args.action_space
+                    ),
                     root=args.output,
                     robot_type=ROBOT_TYPE,
                     use_videos=not args.no_videos,
@@ -405,6 +427,10 @@ def convert(args) -> int:
         f"({seconds:.1f} s, {frames_written / max(seconds, 1e-9):.0f} frames/s); {len(skipped)} skipped"
     )
     print(summary)
+    if ee_targets:
+        print(
+            f"  end-effector actions: {ee_clamped} of {ee_targets} ({100 * ee_clamped / ee_targets:.2f} %) out of reach of the IK"
+        )
     for note in notes:
         print(f"  note: {note}")
     for reason in skipped:
@@ -438,6 +464,14 @@ def main(argv: list[str] | None = None) -> int:
         choices=["lerobot", "radians"],
         default="lerobot",
         help="joint units: LeRobot's SO-101 conventions (degrees, gripper 0-100) or the stack's radians",
+    )
+    parser.add_argument(
+        "--action-space",
+        choices=["joint", "ee"],
+        default="joint",
+        help="the action: the joint targets, or the end-effector target they reach (ee.x ee.y ee.z m in the "
+        "arm's base frame, ee.pitch ee.roll rad, ee.gripper in the joint units), with observation.ee_state "
+        "(the same for the measured joints) beside observation.state",
     )
     parser.add_argument("--cameras", default=None, help="cameras to keep, comma-separated (default: every camera in the bags)")
     parser.add_argument(

@@ -7,9 +7,11 @@ Layout (each module imports only those before it):
                 task_facts (the contract's Task of a task name)
   inprocess.py  the simulation core through so101_native: So101InProcessEnv, So101VectorEnv
   ros.py        so101_sim_node in lockstep over rclpy: So101RosEnv (rclpy imported when built)
+  ee.py         action_space="ee" on either: EeActionEnv, EeActionVectorEnv (the core's IK)
   registry.py   make_env, make_vector_env (the entry points of the ids), register_envs
 """
 
+from .ee import EeActionEnv, EeActionVectorEnv
 from .inprocess import So101InProcessEnv, So101VectorEnv, default_scene
 from .registry import BACKENDS, make_env, make_vector_env, register_envs
 from .ros import So101RosEnv
@@ -17,6 +19,8 @@ from .spaces import STATE, action_space, checked_action, observation_from_state,
 
 __all__ = [
     "BACKENDS",
+    "EeActionEnv",
+    "EeActionVectorEnv",
     "STATE",
     "So101InProcessEnv",
     "So101RosEnv",

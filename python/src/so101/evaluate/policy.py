@@ -1,7 +1,9 @@
 """A LeRobot policy (a local checkpoint or a Hub id) behind the stack's units: joint positions in
 radians and RGB frames in, joint targets in radians out. The policy's own pre- and post-processors
 (normalization, device) run as lerobot-train saved them; this module only maps the stack's values
-onto the policy's features and back."""
+onto the policy's features and back. A policy that acts in end-effector space (so101.ee; trained on
+a dataset converted with --action-space ee, which gives it observation.ee_state) gets its targets
+turned into joint targets by the core's IK here, so every caller drives joints the same way."""
 
 from __future__ import annotations
 
@@ -11,11 +13,13 @@ from pathlib import Path
 
 import numpy as np
 
+from ..ee import EeCommander, checked_action_space, ee_from_lerobot_ee, ee_poses, lerobot_ee_from_ee
 from ..units import lerobot_from_radians, radians_from_lerobot
 
 STATE = "observation.state"
 ENVIRONMENT_STATE = "observation.environment_state"  # the cube's pose (so101.dataset.convert)
 ENVIRONMENT_STATE_SIZE = 7
+EE_STATE = "observation.ee_state"  # the end-effector state (so101.ee; the converter's --action-space ee)
 IMAGE_PREFIX = "observation.images."
 log = logging.getLogger(__name__)
 
@@ -46,7 +50,9 @@ class StackPolicy:
     """Loads the policy and runs one inference per control period (select_action: chunking
     policies such as ACT answer from their action queue in between)."""
 
-    def __init__(self, source: str, units: str = "lerobot", device: str | None = None, task: str = ""):
+    def __init__(
+        self, source: str, units: str = "lerobot", device: str | None = None, task: str = "", action_space: str = "auto"
+    ):
         from lerobot.configs import FeatureType, PreTrainedConfig
         from lerobot.policies.factory import get_policy_class, make_pre_post_processors
 
@@ -85,14 +91,29 @@ class StackPolicy:
         self.needs_environment_state = ENVIRONMENT_STATE in inputs
         if self.needs_environment_state and tuple(inputs[ENVIRONMENT_STATE].shape) != (ENVIRONMENT_STATE_SIZE,):
             raise PolicyError(f"the policy's {ENVIRONMENT_STATE} is {inputs[ENVIRONMENT_STATE]}, not the cube's pose (7 values)")
-        known = (STATE, ENVIRONMENT_STATE)
+        self.needs_ee_state = EE_STATE in inputs
+        if self.needs_ee_state and tuple(inputs[EE_STATE].shape) != (6,):
+            raise PolicyError(f"the policy's {EE_STATE} is {inputs[EE_STATE]}, not the end-effector state (6 values)")
+        # auto: a policy that reads the end-effector state was trained on a dataset whose actions
+        # are end-effector targets (the converter writes both or neither).
+        if action_space == "auto":
+            action_space = "ee" if self.needs_ee_state else "joint"
+        try:
+            self.action_space = checked_action_space(action_space)
+        except ValueError as error:
+            raise PolicyError(str(error)) from None
+        self._commander: EeCommander | None = None  # started from the first observation of an episode
+        self._positions: np.ndarray | None = None
+        self.ee_steps = self.ee_clamped = 0  # end-effector targets turned into joints, and how many out of reach
+        known = (STATE, ENVIRONMENT_STATE, EE_STATE)
         others = [key for key, feature in inputs.items() if key not in known and feature.type is not FeatureType.VISUAL]
         if others:
             raise PolicyError(f"the policy needs inputs the stack does not provide: {others}")
         log.info(
-            "policy %s (%s) on %s, cameras %s",
+            "policy %s (%s, %s actions) on %s, cameras %s",
             source,
             config.type,
+            self.action_space,
             self.device,
             ", ".join(f"{c.name} {c.width}x{c.height}" for c in self.cameras) or "none",
         )
@@ -102,6 +123,7 @@ class StackPolicy:
         self.policy.reset()
         self.preprocessor.reset()
         self.postprocessor.reset()
+        self._commander = None
 
     def observation(
         self, positions: np.ndarray, images: dict[str, np.ndarray], cube_pose: np.ndarray | None = None
@@ -109,8 +131,12 @@ class StackPolicy:
         """The policy's observation from joint positions (rad, contract order), HxWx3 uint8 frames
         by camera name (frames of another size are resized to the policy's) and, for a policy
         that takes the environment state, the cube's pose [x y z qw qx qy qz] (m, world frame)."""
-        state = lerobot_from_radians(positions) if self.units == "lerobot" else np.asarray(positions, dtype=np.float64)
+        self._positions = np.asarray(positions, dtype=np.float64)
+        state = lerobot_from_radians(positions) if self.units == "lerobot" else self._positions
         observation = {STATE: state.astype(np.float32)}
+        if self.needs_ee_state:
+            ee_state = ee_poses(self._positions)
+            observation[EE_STATE] = (lerobot_ee_from_ee(ee_state) if self.units == "lerobot" else ee_state).astype(np.float32)
         if self.needs_environment_state:
             if cube_pose is None:
                 raise PolicyError(f"the policy takes {ENVIRONMENT_STATE} (the cube's pose) and none was given")
@@ -139,8 +165,24 @@ class StackPolicy:
         )
         values = action.squeeze(0).to("cpu").numpy().astype(np.float64)
         if values.shape != (6,) or not np.all(np.isfinite(values)):
-            raise PolicyError(f"the policy answered {values}, not six finite joint targets")
-        return radians_from_lerobot(values) if self.units == "lerobot" else values
+            raise PolicyError(f"the policy answered {values}, not six finite {self.action_space} targets")
+        if self.action_space == "joint":
+            return radians_from_lerobot(values) if self.units == "lerobot" else values
+        return self._joint_targets(ee_from_lerobot_ee(values) if self.units == "lerobot" else values)
+
+    def _joint_targets(self, ee_target: np.ndarray) -> np.ndarray:
+        """An end-effector target -> joint targets by the IK, from the episode's first joints on."""
+        if self._commander is None:
+            self._commander = EeCommander()
+            self._commander.reset(self._positions)
+        steps = self._commander.step(ee_target)
+        self.ee_steps += 1
+        self.ee_clamped += int(steps.clamped[0])
+        if steps.clamped[0]:
+            log.debug(
+                "end-effector target %s out of reach by %.3f m: the nearest pose commanded", ee_target, steps.position_error[0]
+            )
+        return steps.targets[0]
 
 
 def resize(frame: np.ndarray, height: int, width: int) -> np.ndarray:

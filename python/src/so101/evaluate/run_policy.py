@@ -7,6 +7,10 @@ so101_sim_node and so101_feetech_driver: both speak the same topics. When an inp
 (older than --max-age) no command is sent, so the arm holds (the driver's watchdog, the sim's
 last target) until it is fresh again.
 
+A policy that acts in end-effector space (trained on a dataset converted with --action-space ee)
+has each target turned into joint targets by the core's IK, then sent as any joint command: the
+same limits, and the arm's node's own max-step.
+
 Evaluation (--eval N): N seeded episodes on a sim of its own in lockstep (physics waits for the
 policy), success rate, mean and best reward, an MP4 per episode and eval_info.json in --output;
 with --backend inprocess --workers K, the episodes split over K processes.
@@ -190,9 +194,16 @@ def run_live(args, policy: StackPolicy) -> int:
     late, lost = (clock.late, clock.lost) if clock else (0, 0.0)
     print(
         f"{steps} commands at {args.fps:.0f} Hz, inference {mean_ms:.1f} ms mean, {late} late periods "
-        f"({lost:.2f} s lost), {held} held"
+        f"({lost:.2f} s lost), {held} held{ee_report(policy)}"
     )
     return 0
+
+
+def ee_report(policy: StackPolicy) -> str:
+    """How many of an end-effector policy's targets were out of reach (clamped by the IK)."""
+    if policy.action_space != "ee":
+        return ""
+    return f", {policy.ee_clamped} of {policy.ee_steps} end-effector targets out of reach (nearest pose commanded)"
 
 
 # =========================================================================== evaluation
@@ -242,7 +253,7 @@ def evaluate(args, policy: StackPolicy) -> int:
 
 def load_policy(args) -> StackPolicy:
     task = args.task or contract.TASKS[args.sim_task].description
-    return StackPolicy(args.policy, units=args.units, device=args.device, task=task)
+    return StackPolicy(args.policy, units=args.units, device=args.device, task=task, action_space=args.action_space)
 
 
 def evaluate_share(args, first_index: int, seeds: list[int], env_cameras: dict, filmed_now: list[str]):
@@ -275,7 +286,7 @@ def run_share(policy: StackPolicy, args, first_index: int, seeds: list[int], env
         camera_poses=args.camera_poses,
     )
     try:
-        return run_episodes(
+        results = run_episodes(
             env,
             act,
             lambda _observation: policy.reset(),
@@ -288,6 +299,9 @@ def run_share(policy: StackPolicy, args, first_index: int, seeds: list[int], env
             quiet=args.quiet or args.workers > 1,
             first_index=first_index,
         )
+        if report := ee_report(policy):
+            log.info("episodes %d-%d%s", first_index, first_index + len(seeds) - 1, report)
+        return results
     finally:
         env.close()
 
@@ -306,6 +320,14 @@ def parser() -> argparse.ArgumentParser:
         choices=["lerobot", "radians"],
         default="lerobot",
         help="joint units the policy was trained in (so101-bag-to-lerobot's default is lerobot)",
+    )
+    p.add_argument(
+        "--action-space",
+        choices=["auto", "joint", "ee"],
+        default="auto",
+        help="what the policy's actions are: joint targets, or end-effector targets (x y z m, pitch roll rad, "
+        "gripper; so101.ee) turned into joint targets by the IK; auto: ee when the policy reads "
+        "observation.ee_state (a dataset converted with --action-space ee)",
     )
     p.add_argument(
         "--task", default=None, help="task text for language-conditioned policies (default: the --sim-task's description)"

@@ -61,6 +61,13 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         help="the sim's lite scene (no meshes), far faster to render on a CPU; a camera policy trained on it is "
         "evaluated on it too (so101-run-policy --lite, as the recipes do)",
     )
+    p.add_argument(
+        "--action-space",
+        choices=["joint", "ee"],
+        default="joint",
+        help="the dataset's action: joint targets, or the end-effector targets they reach, with "
+        "observation.ee_state (so101-bag-to-lerobot --action-space)",
+    )
     sim_options.add_arguments(p)
     p.add_argument("--speed", type=float, default=None, help="sim speed (default 8 without cameras, else 4)")
     p.add_argument("--keep-failures", action="store_true", help="keep episodes the expert failed")
@@ -94,7 +101,7 @@ def launch_command(args, output: Path) -> list[str]:
 
 def convert_command(args, output: Path) -> list[str]:
     command = [sys.executable, "-m", "so101.dataset.convert", str(output / "bags"), "--output", str(output / "dataset")]
-    command += ["--repo-id", args.repo_id]
+    command += ["--repo-id", args.repo_id, "--action-space", args.action_space]
     if args.no_environment_state:
         command.append("--no-environment-state")
     return command + ([] if args.keep_failures else ["--successful-only"])
@@ -159,6 +166,7 @@ def run_inprocess(args, output: Path) -> int:
         randomize=args.randomize,
         camera_poses=args.camera_poses,
         repo_id=args.repo_id,
+        action_space=args.action_space,
     )
     output.mkdir(parents=True, exist_ok=True)
     started = time.monotonic()

@@ -24,7 +24,8 @@ from pathlib import Path
 import numpy as np
 
 from .. import contract
-from ..dataset.convert import MIN_VIDEO_WIDTH, ROBOT_TYPE, features_for, image_size, write_simulation_settings
+from ..dataset.convert import EE_STATE, MIN_VIDEO_WIDTH, ROBOT_TYPE, features_for, image_size, write_simulation_settings
+from ..dataset.ee_columns import ee_columns
 from ..evaluate.parallel import run_shares, split
 from ..units import lerobot_from_radians
 
@@ -69,6 +70,7 @@ class Options:
     camera_poses: str | None
     repo_id: str
     task: str = "cube_to_bin"
+    action_space: str = "joint"  # "ee": end-effector actions and state (so101.dataset.ee_columns)
 
 
 @dataclass
@@ -175,14 +177,19 @@ def record_share(options: Options, first: int, count: int, root: str, workers: i
                 dataset = LeRobotDataset.create(
                     repo_id=options.repo_id,
                     fps=int(contract.CONTROL_RATE),
-                    features=features_for(options.cameras, use_videos=True, environment_state=options.environment_state),
+                    features=features_for(
+                        options.cameras,
+                        use_videos=True,
+                        environment_state=options.environment_state,
+                        action_space=options.action_space,
+                    ),
                     root=root,
                     robot_type=ROBOT_TYPE,
                     use_videos=True,
                 )
             # One encoder process per camera and episode is LeRobot's default; beside other
             # workers it oversubscribes the cores (2 workers with 3 cameras: 3x one's time).
-            write_episode(dataset, frames, success, task_text, options.environment_state, parallel_encoding=workers == 1)
+            write_episode(dataset, frames, success, task_text, options, parallel_encoding=workers == 1)
         note = "cube in the bin" if success else "the cube is not in the bin"
         recorded.append(Recorded(episode, success, len(frames["state"]), kept, note, settings, expert.regrasps))
     if dataset is not None:
@@ -190,9 +197,12 @@ def record_share(options: Options, first: int, count: int, root: str, workers: i
     return recorded
 
 
-def write_episode(dataset, frames: dict, success: bool, task: str, environment_state: bool, parallel_encoding: bool) -> None:
+def write_episode(dataset, frames: dict, success: bool, task: str, options: Options, parallel_encoding: bool) -> None:
     state = lerobot_from_radians(np.stack(frames["state"])).astype(np.float32)
     action = lerobot_from_radians(np.stack(frames["action"])).astype(np.float32)
+    ee_state = None
+    if options.action_space == "ee":
+        action, ee_state, _ = ee_columns(state, action, "lerobot")
     verdicts = np.array(frames["success"], dtype=bool)
     verdicts[-1] = success  # the episode's verdict is its last frame's, as in a converted bag
     for k in range(len(state)):
@@ -203,8 +213,10 @@ def write_episode(dataset, frames: dict, success: bool, task: str, environment_s
             "next.success": verdicts[k : k + 1],
             "task": task,
         }
-        if environment_state:
+        if options.environment_state:
             frame["observation.environment_state"] = frames["cube"][k]
+        if ee_state is not None:
+            frame[EE_STATE] = ee_state[k]
         for name, image in frames["images"][k].items():
             frame[f"observation.images.{name}"] = image
         dataset.add_frame(frame)

@@ -5,7 +5,8 @@ LeRobot's envs and the converter's datasets see the robot.
 Observation: {"agent_pos": float32[6] joint positions in LeRobot units (degrees, gripper 0-100),
 "environment_state": float32[7] cube position (m) and orientation (w x y z), world frame (when
 asked), "pixels": {camera: uint8[H, W, 3]} (when cameras are asked)}. Action: float32[6] joint
-targets in LeRobot units. info["is_success"]: the sim's /task/success of the step. render(): the
+targets in LeRobot units; with action_space="ee", an end-effector target (so101.ee: x y z m,
+pitch roll rad, gripper 0-100) and the observation's "ee_state" the same for the measured joints. info["is_success"]: the sim's /task/success of the step. render(): the
 render camera's frame of the last step (rgb_array), enlarged to at least 360 pixels tall (what
 lerobot-eval films), at metadata["render_fps"] = fps.
 """
@@ -19,6 +20,7 @@ import numpy as np
 from gymnasium import spaces
 
 from .. import contract
+from ..ee import ee_from_lerobot_ee, ee_limits, lerobot_ee_from_ee
 from ..envs import make_env
 from ..evaluate.episodes import watchable
 from ..sim_options import DEFAULT_SERVO_MODEL
@@ -28,6 +30,8 @@ from ..units import JOINT_LIMITS, lerobot_from_radians, radians_from_lerobot
 def observation_from_sim(sim_observation: dict, cameras, environment_state: bool) -> dict:
     """so101.envs' observation (radians) -> LeRobot's env observation."""
     observation = {"agent_pos": lerobot_from_radians(sim_observation["agent_pos"]).astype(np.float32)}
+    if "ee_state" in sim_observation:
+        observation["ee_state"] = lerobot_ee_from_ee(sim_observation["ee_state"]).astype(np.float32)
     if environment_state:
         observation["environment_state"] = np.asarray(sim_observation["environment_state"], dtype=np.float32)
     if cameras:
@@ -35,12 +39,12 @@ def observation_from_sim(sim_observation: dict, cameras, environment_state: bool
     return observation
 
 
-def sim_action_from_lerobot(action) -> np.ndarray:
-    """A LeRobot action (degrees, gripper 0-100) -> so101.envs' (radians)."""
+def sim_action_from_lerobot(action, action_space: str = "joint") -> np.ndarray:
+    """A LeRobot action (degrees, gripper 0-100; or an end-effector target) -> so101.envs' (radians)."""
     action = np.asarray(action, dtype=np.float64).reshape(-1)
     if action.shape != (6,):
-        raise ValueError(f"an so101_sim action is 6 joint targets, not shape {action.shape}")
-    return radians_from_lerobot(action)
+        raise ValueError(f"an so101_sim action is 6 {action_space} targets, not shape {action.shape}")
+    return ee_from_lerobot_ee(action) if action_space == "ee" else radians_from_lerobot(action)
 
 
 class So101LeRobotEnv(gym.Env):
@@ -61,7 +65,9 @@ class So101LeRobotEnv(gym.Env):
         servo_params: str | os.PathLike = DEFAULT_SERVO_MODEL,
         randomize: bool | str | os.PathLike = False,
         camera_poses: str | os.PathLike | None = None,
+        action_space: str = "joint",
     ):
+        self._action_space = action_space
         self._cameras = {name: tuple(size) for name, size in (cameras or {}).items()}
         self._environment_state = environment_state
         self._render_camera = render_camera
@@ -76,15 +82,18 @@ class So101LeRobotEnv(gym.Env):
             servo_params=servo_params,
             randomize=randomize,
             camera_poses=camera_poses,
+            action_space=action_space,
         )
         self.metadata = {**self.metadata, "render_fps": fps}
         self.render_mode = render_mode
         self.task_description = self.task = task_description
-        low, high = lerobot_from_radians(JOINT_LIMITS.T)
+        low, high = lerobot_ee_from_ee(ee_limits().T) if action_space == "ee" else lerobot_from_radians(JOINT_LIMITS.T)
         self.action_space = spaces.Box(low.astype(np.float32), high.astype(np.float32), dtype=np.float32)
         space = {"agent_pos": spaces.Box(-np.inf, np.inf, shape=(6,), dtype=np.float32)}
         if environment_state:
             space["environment_state"] = spaces.Box(-np.inf, np.inf, shape=(7,), dtype=np.float32)
+        if action_space == "ee":
+            space["ee_state"] = spaces.Box(-np.inf, np.inf, shape=(6,), dtype=np.float32)
         if self._cameras:
             space["pixels"] = spaces.Dict(
                 {name: spaces.Box(0, 255, shape=(h, w, 3), dtype=np.uint8) for name, (h, w) in self._cameras.items()}
@@ -105,7 +114,7 @@ class So101LeRobotEnv(gym.Env):
         return self._convert(sim_observation), {**info, "is_success": bool(info["is_success"])}
 
     def step(self, action):
-        sim_observation, reward, terminated, truncated, info = self._sim.step(sim_action_from_lerobot(action))
+        sim_observation, reward, terminated, truncated, info = self._sim.step(sim_action_from_lerobot(action, self._action_space))
         return self._convert(sim_observation), reward, terminated, truncated, {**info, "is_success": bool(info["is_success"])}
 
     def render(self) -> np.ndarray:

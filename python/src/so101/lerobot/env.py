@@ -20,9 +20,11 @@ from lerobot.envs.configs import EnvConfig
 from lerobot.utils.constants import ACTION, OBS_ENV_STATE, OBS_IMAGES, OBS_STATE
 
 from .. import contract
+from ..ee import ACTION_SPACES
 from ..sim_options import DEFAULT_SERVO_MODEL, camera_poses_spec, randomize_spec, servo_params_spec
 
 PACKAGE = "lerobot_env_so101_sim"
+EE_STATE = "observation.ee_state"
 ENVIRONMENT_STATE_SIZE = 7  # cube position (x y z, m) and orientation (w x y z), world frame
 
 
@@ -43,8 +45,12 @@ def register_envs() -> None:
             )
 
 
-def features_of(cameras: dict[str, tuple[int, int]], environment_state: bool) -> tuple[dict[str, PolicyFeature], dict[str, str]]:
-    """(features, features_map) of the env's observations and action, like LeRobot's own envs."""
+def features_of(
+    cameras: dict[str, tuple[int, int]], environment_state: bool, action_space: str = "joint"
+) -> tuple[dict[str, PolicyFeature], dict[str, str]]:
+    """(features, features_map) of the env's observations and action, like LeRobot's own envs;
+    with action_space="ee", the end-effector state too (observation.ee_state, as the converter's
+    --action-space ee writes it)."""
     features = {
         ACTION: PolicyFeature(type=FeatureType.ACTION, shape=(len(contract.JOINT_NAMES),)),
         "agent_pos": PolicyFeature(type=FeatureType.STATE, shape=(len(contract.JOINT_NAMES),)),
@@ -53,6 +59,9 @@ def features_of(cameras: dict[str, tuple[int, int]], environment_state: bool) ->
     if environment_state:
         features["environment_state"] = PolicyFeature(type=FeatureType.ENV, shape=(ENVIRONMENT_STATE_SIZE,))
         features_map["environment_state"] = OBS_ENV_STATE
+    if action_space == "ee":
+        features["ee_state"] = PolicyFeature(type=FeatureType.STATE, shape=(len(contract.EE_NAMES),))
+        features_map["ee_state"] = EE_STATE
     for name, (height, width) in cameras.items():
         features[f"pixels/{name}"] = PolicyFeature(type=FeatureType.VISUAL, shape=(height, width, 3))
         features_map[f"pixels/{name}"] = f"{OBS_IMAGES}.{name}"
@@ -80,12 +89,17 @@ class So101SimEnvConfig(EnvConfig):
     randomize: str = "off"
     # Where your real cameras stand: so101-camera-align's file (.toml); empty: the scene's cameras.
     camera_poses: str | None = None
+    # What the policy's actions are: joint targets, or end-effector targets ("ee": x y z m, pitch
+    # roll rad, gripper 0-100, turned into joint targets by the core's IK; so101.ee).
+    action_space: str = "joint"
 
     def __post_init__(self):
         if self.backend not in ("inprocess", "ros"):
             raise ValueError(f"so101_sim: backend {self.backend!r}, not inprocess or ros")
         if self.task not in contract.TASKS:
             raise ValueError(f"so101_sim: task {self.task!r}, not one of {', '.join(contract.TASKS)}")
+        if self.action_space not in ACTION_SPACES:
+            raise ValueError(f"so101_sim: action_space {self.action_space!r}, not one of {', '.join(ACTION_SPACES)}")
         for name in [*self.cameras, self.render_camera]:
             if name not in contract.CAMERA_NAMES:
                 raise ValueError(f"so101_sim: camera {name!r}, not one of {', '.join(contract.CAMERA_NAMES)}")
@@ -94,7 +108,7 @@ class So101SimEnvConfig(EnvConfig):
         self.servo_params = servo_params_spec(self.servo_params)
         self.randomize = randomize_spec(self.randomize)
         self.camera_poses = camera_poses_spec(self.camera_poses)
-        self.features, self.features_map = features_of(self.cameras, self.environment_state)
+        self.features, self.features_map = features_of(self.cameras, self.environment_state, self.action_space)
 
     @property
     def package_name(self) -> str:
@@ -118,6 +132,7 @@ class So101SimEnvConfig(EnvConfig):
             "servo_params": self.servo_params,
             "randomize": self.randomize,
             "camera_poses": self.camera_poses,
+            "action_space": self.action_space,
         }
         if self.episode_length:
             kwargs["max_episode_steps"] = int(self.episode_length)

@@ -7,6 +7,7 @@ from dataclasses import dataclass, field
 from lerobot.robots import RobotConfig
 
 from ... import contract
+from ...ee import ACTION_SPACES
 
 
 @dataclass
@@ -38,10 +39,16 @@ class SO101ROSConfig(RobotConfig):
     # LeRobot's max_relative_target: the largest step (LeRobot units) from the present position
     # one action may ask of a joint; None: no limit.
     max_relative_target: float | None = None
+    # What actions are: "joint" ("<joint>.pos", LeRobot units) or "ee" ("ee.x" ... "ee.gripper": the
+    # gripper's target pose in the arm's base frame, m and rad, gripper 0-100; so101.ee), turned
+    # into joint targets by the core's IK, then max_relative_target and the limits as for joints.
+    action_space: str = "joint"
     # Name of the rclpy node.
     node_name: str = "so101_lerobot_robot"
 
     def __post_init__(self):
+        if self.action_space not in ACTION_SPACES:
+            raise ValueError(f"so101_ros: action_space {self.action_space!r}, not one of {', '.join(ACTION_SPACES)}")
         for name, camera in self.cameras.items():
             if not camera.topic:
                 leaf = contract.IMAGE_COMPRESSED if camera.compressed else contract.IMAGE_RAW

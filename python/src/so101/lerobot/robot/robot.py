@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import logging
 import threading
 import time
 from functools import cached_property
@@ -10,9 +11,12 @@ from typing import Any
 import numpy as np
 from lerobot.robots import Robot
 
+from ...ee import EE_FEATURE_NAMES
 from ...units import FEATURE_NAMES, JOINT_NAMES, lerobot_from_radians
-from .actions import command_from_action
+from .actions import command_from_action, command_from_ee_action
 from .config import SO101ROSConfig
+
+log = logging.getLogger(__name__)
 
 
 class SO101ROS(Robot):
@@ -28,6 +32,7 @@ class SO101ROS(Robot):
         self._state_time = 0.0  # when it came (time.monotonic)
         self._frames: dict[str, Any] = {}  # latest sensor_msgs/Image per camera
         self._goal: np.ndarray | None = None  # last command sent, rad
+        self._ee_target: np.ndarray | None = None  # action_space "ee": the last end-effector target asked for
         self._context = self._node = self._executor = self._thread = self._publisher = None
 
     @cached_property
@@ -38,7 +43,7 @@ class SO101ROS(Robot):
 
     @cached_property
     def action_features(self) -> dict:
-        return {key: float for key in FEATURE_NAMES}
+        return {key: float for key in (EE_FEATURE_NAMES if self.config.action_space == "ee" else FEATURE_NAMES)}
 
     @property
     def is_connected(self) -> bool:
@@ -66,7 +71,7 @@ class SO101ROS(Robot):
         from ...messages import joint_positions
 
         with self._lock:
-            self._state, self._frames, self._goal = None, {}, None
+            self._state, self._frames, self._goal, self._ee_target = None, {}, None, None
         self._context = rclpy.Context()
         rclpy.init(context=self._context)  # a private context installs no signal handlers
         node = rclpy.create_node(
@@ -174,7 +179,13 @@ class SO101ROS(Robot):
         with self._lock:
             present = self._state
         hold = self._goal if self._goal is not None else present
-        radians, sent = command_from_action(action, hold, present, self.config.max_relative_target)
+        if self.config.action_space == "ee":
+            command = command_from_ee_action(action, hold, present, self.config.max_relative_target, self._ee_target)
+            if command.clamped:
+                log.debug("so101_ros: end-effector action %s out of reach: the nearest pose commanded", action)
+            radians, sent, self._ee_target = command.radians, command.sent, command.target
+        else:
+            radians, sent = command_from_action(action, hold, present, self.config.max_relative_target)
         msg = self._joint_state_type()
         msg.header.stamp = self._node.get_clock().now().to_msg()
         msg.name = list(JOINT_NAMES)
