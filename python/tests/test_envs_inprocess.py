@@ -146,3 +146,32 @@ def test_the_expert_puts_the_cube_in_the_bin():
                 break
         assert terminated and info["is_success"] and reward == 1.0, seed
     env.close()
+
+
+def test_the_expert_lifts_the_cube_and_holds_it():
+    """lift_cube: the same planner grasps, lifts and holds; success needs both jaws on the cube
+    5 cm up, so the cube_to_bin expert, which lets go over the bin, never scores it."""
+    env = gym.make("so101/LiftCube-v0", dense_reward=True)
+    for seed in (1, 6):
+        rewards = []
+        observation, _ = env.reset(seed=seed)
+        rest = observation["environment_state"][2]
+        expert = ExpertPolicy(waypoint_noise=0.003, action_noise=0.005, seed=seed, task="lift_cube")
+        expert.reset(observation)
+        for _ in range(300):
+            observation, reward, terminated, truncated, info = env.step(expert(observation))
+            rewards.append(reward)
+            if terminated:
+                break
+        assert terminated and info["is_success"] and reward == 1.0, seed
+        assert observation["environment_state"][2] > rest + 0.05
+        assert 0.0 < max(rewards[:-1]) < 1.0  # the dense shaping before success
+    observation, _ = env.reset(seed=1)
+    expert = ExpertPolicy(seed=1)  # cube_to_bin's plan
+    expert.reset(observation)
+    successes = []
+    for _ in range(300):
+        observation, _, _, _, info = env.step(expert(observation))
+        successes.append(info["is_success"])
+    assert not successes[-1]  # released over the bin: not held
+    env.close()

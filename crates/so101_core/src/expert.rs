@@ -1,6 +1,7 @@
-//! The scripted expert for cube_to_bin: from the cube's pose, a grasp from above with the jaws
-//! across two faces of the cube, a lift, a move over the bin and a release, as timed task-space
-//! waypoints that the shared IK turns into joint targets every control period. Noise on the
+//! The scripted expert of every task: from the cube's pose, a grasp from above with the jaws
+//! across two faces of the cube, then what the task asks (cube_to_bin: a lift, a move over the bin
+//! and a release; lift_cube: a lift, held; the touch tasks: the jaws at the cube, held), as timed
+//! task-space waypoints that the shared IK turns into joint targets every control period. Noise on the
 //! waypoints and on the joint targets (as in the ALOHA scripted policies) makes the
 //! demonstrations varied. Pure: no I/O.
 
@@ -9,6 +10,7 @@ use std::f64::consts::FRAC_PI_2;
 use crate::{
     kinematics::{self, ArmPositions, IkOptions, TaskPose, ARM_JOINTS},
     robot::{JointPositions, JOINT_COUNT, JOINT_LIMITS},
+    task::TaskKind,
 };
 use nalgebra::Vector3;
 use rand::Rng;
@@ -17,6 +19,8 @@ use rand_distr_free::normal;
 /// Where things are and how the expert moves (base frame, m and s).
 #[derive(Debug, Clone, PartialEq)]
 pub struct ExpertConfig {
+    /// The task the expert plays.
+    pub task: TaskKind,
     /// Where a released cube should drop: above the bin's centre.
     pub bin: Vector3<f64>,
     /// Height of the table top.
@@ -55,6 +59,7 @@ impl ExpertConfig {
         action_noise: f64,
     ) -> Self {
         Self {
+            task: TaskKind::CubeToBin,
             bin: bin_in_world - base_in_world,
             table_z: SIM_TABLE_Z - base_in_world.z,
             gripper_open: GRIPPER_OPEN,
@@ -63,6 +68,11 @@ impl ExpertConfig {
             action_noise,
             slowness: 1.0,
         }
+    }
+
+    /// The same expert playing `task`.
+    pub fn for_task(self, task: TaskKind) -> Self {
+        Self { task, ..self }
     }
 }
 
@@ -145,6 +155,7 @@ pub struct Plan {
     noisy_grasp: Vector3<f64>,
     carry: Carry,
     table_z: f64,
+    task: TaskKind,
     regrasps: u32,
     gripper_open: f64,
     gripper_closed: f64,
@@ -265,6 +276,7 @@ impl Plan {
             noisy_grasp: grasp.position,
             carry,
             table_z: config.table_z,
+            task: config.task,
             regrasps: 0,
             gripper_open: config.gripper_open,
             gripper_closed: config.gripper_closed,
@@ -274,7 +286,8 @@ impl Plan {
         Ok(plan)
     }
 
-    /// From wherever the arm is: above the grasp, down to it, close, lift, carry, release.
+    /// From wherever the arm is: above the grasp, down to it, then the task's part: close, lift,
+    /// carry, release (cube_to_bin); close, lift, hold (lift_cube); hold there (the touch tasks).
     fn pick_and_place(&self, grasp: TaskPose, approach_s: f64) -> Vec<Waypoint> {
         let (open, closed) = (self.gripper_open, self.gripper_closed);
         let waypoint = |pose: TaskPose, gripper: f64, duration: f64, gate: Gate| Waypoint {
@@ -288,17 +301,34 @@ impl Plan {
             ..grasp
         };
         let carry = self.carry;
-        vec![
+        let down = [
             waypoint(approach, open, approach_s, Gate::None),
             waypoint(grasp, open, 1.0, Gate::Grasp),
             waypoint(grasp, open, 0.2, Gate::None),
+        ];
+        let grip_and_lift = [
             waypoint(grasp, closed, 0.6, Gate::Gripped),
             waypoint(carry.lifted, closed, 1.0, Gate::None),
-            waypoint(carry.over_bin, closed, 1.5, Gate::None),
-            waypoint(carry.release, closed, 0.5, Gate::Reached),
-            waypoint(carry.release, open, 0.5, Gate::None),
-            waypoint(carry.leave, open, 0.7, Gate::None),
-        ]
+        ];
+        let rest: Vec<Waypoint> = match self.task {
+            TaskKind::CubeToBin => grip_and_lift
+                .into_iter()
+                .chain([
+                    waypoint(carry.over_bin, closed, 1.5, Gate::None),
+                    waypoint(carry.release, closed, 0.5, Gate::Reached),
+                    waypoint(carry.release, open, 0.5, Gate::None),
+                    waypoint(carry.leave, open, 0.7, Gate::None),
+                ])
+                .collect(),
+            TaskKind::LiftCube => grip_and_lift
+                .into_iter()
+                .chain([waypoint(carry.lifted, closed, 0.5, Gate::None)])
+                .collect(),
+            TaskKind::TouchCube | TaskKind::TouchCubeSparse => {
+                vec![waypoint(grasp, open, 0.5, Gate::None)]
+            }
+        };
+        down.into_iter().chain(rest).collect()
     }
 
     /// Seconds from start to the last waypoint, as timed (gates that wait add to it).

@@ -21,6 +21,8 @@ pub enum TaskKind {
     TouchCubeSparse,
     /// Sparse: reward 1 once the cube lies in the bin (optional dense shaping).
     CubeToBin,
+    /// Sparse: reward 1 while the cube is held in both jaws, lifted (optional dense shaping).
+    LiftCube,
 }
 
 /// How a task's reward is given.
@@ -64,13 +66,19 @@ pub struct TaskFacts {
 
 impl TaskKind {
     /// Every task, in the order the command lines list them.
-    pub const ALL: [TaskKind; 3] = [Self::CubeToBin, Self::TouchCube, Self::TouchCubeSparse];
+    pub const ALL: [TaskKind; 4] = [
+        Self::CubeToBin,
+        Self::LiftCube,
+        Self::TouchCube,
+        Self::TouchCubeSparse,
+    ];
 
     pub const fn facts(self) -> &'static TaskFacts {
         match self {
             Self::CubeToBin => &CUBE_TO_BIN,
             Self::TouchCube => &TOUCH_CUBE,
             Self::TouchCubeSparse => &TOUCH_CUBE_SPARSE,
+            Self::LiftCube => &LIFT_CUBE,
         }
     }
 
@@ -94,6 +102,17 @@ const CUBE_TO_BIN: TaskFacts = TaskFacts {
     reward_modes: &[RewardMode::Sparse, RewardMode::Dense],
     control_rate_hz: CONTROL_RATE_HZ,
     help: "sparse: reward 1 once the cube lies in the bin (dense: staged shaping)",
+};
+
+const LIFT_CUBE: TaskFacts = TaskFacts {
+    name: "lift_cube",
+    gym_id: "so101/LiftCube-v0",
+    description: "lift the cube",
+    episode_steps: 300,
+    terminates_on_success: true,
+    reward_modes: &[RewardMode::Sparse, RewardMode::Dense],
+    control_rate_hz: CONTROL_RATE_HZ,
+    help: "sparse: reward 1 once the cube is held in both jaws 5 cm above the table (dense: staged shaping)",
 };
 
 const TOUCH_CUBE: TaskFacts = TaskFacts {

@@ -1,4 +1,4 @@
-//! The scripted cube_to_bin expert in-process (so101_core::expert, the planner teleop_node's
+//! The scripted expert of every task in-process (so101_core::expert, the planner teleop_node's
 //! expert source uses), for demonstrations at simulation speed: plan from the settled cube, then
 //! each period the joint targets for the arm as measured (the plan waits at its gates for the
 //! ramped servos), moved at most `max_step` per period.
@@ -12,13 +12,14 @@ use so101_core::{
     expert::{cube_yaw, ExpertConfig, Plan, SIM_BIN_IN_WORLD},
     kinematics::SIM_BASE_IN_WORLD,
     robot::{follow, JointPositions},
+    task::TaskKind,
 };
 
 use crate::world::joint_targets;
 
 /// The expert with teleop_node's options: `waypoint_noise` (m) and `action_noise` (rad) are the
 /// standard deviations of its noise, drawn from a generator seeded with `seed`; `max_step` (rad)
-/// is the largest change of a target in one period.
+/// is the largest change of a target in one period; `task` the task it plays ("cube_to_bin", ...).
 #[pyclass(module = "so101_native")]
 pub struct Expert {
     config: ExpertConfig,
@@ -38,8 +39,15 @@ fn array<const N: usize>(values: &[f64], what: &str) -> PyResult<[f64; N]> {
 #[pymethods]
 impl Expert {
     #[new]
-    #[pyo3(signature = (waypoint_noise = 0.0, action_noise = 0.0, seed = 0, max_step = 0.1))]
-    fn new(waypoint_noise: f64, action_noise: f64, seed: u64, max_step: f64) -> PyResult<Self> {
+    #[pyo3(signature = (waypoint_noise = 0.0, action_noise = 0.0, seed = 0, max_step = 0.1, task = "cube_to_bin"))]
+    fn new(
+        waypoint_noise: f64,
+        action_noise: f64,
+        seed: u64,
+        max_step: f64,
+        task: &str,
+    ) -> PyResult<Self> {
+        let task: TaskKind = task.parse().map_err(PyValueError::new_err)?;
         for (name, value) in [
             ("waypoint_noise", waypoint_noise),
             ("action_noise", action_noise),
@@ -59,7 +67,8 @@ impl Expert {
                 Vector3::from(SIM_BIN_IN_WORLD),
                 waypoint_noise,
                 action_noise,
-            ),
+            )
+            .for_task(task),
             rng: ChaCha8Rng::seed_from_u64(seed),
             max_step,
             plan: None,

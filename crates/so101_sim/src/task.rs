@@ -58,6 +58,20 @@ impl TaskObservation {
     pub fn cube_in_bin(&self) -> bool {
         self.bin_inside.contains(&self.cube)
     }
+
+    /// How far the cube is lifted, 0 to 1 ([`LIFT_HEIGHT`] above its rest), while grasped.
+    fn lift(&self) -> f64 {
+        if self.grasped() {
+            ((self.cube.z - self.cube_rest_height) / LIFT_HEIGHT).clamp(0.0, 1.0)
+        } else {
+            0.0
+        }
+    }
+
+    /// The cube held in both jaws, [`LIFT_HEIGHT`] above its rest: lift_cube's success.
+    pub fn lifted(&self) -> bool {
+        self.lift() >= 1.0
+    }
 }
 
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -89,26 +103,35 @@ pub fn evaluate(kind: TaskKind, dense_shaping: bool, observation: &TaskObservati
             };
             TaskOutcome { reward, success }
         }
+        TaskKind::LiftCube => {
+            let success = observation.lifted();
+            let reward = match (success, dense_shaping) {
+                (true, _) => 1.0,
+                (false, false) => 0.0,
+                (false, true) => approach_grasp_lift(observation),
+            };
+            TaskOutcome { reward, success }
+        }
     }
+}
+
+/// The first three stages of the staged shaping, each worth up to 0.2: approach the cube, grasp
+/// it, lift it.
+fn approach_grasp_lift(observation: &TaskObservation) -> f64 {
+    let approach = 1.0 - (10.0 * observation.tip_to_cube()).tanh();
+    0.2 * (approach + f64::from(u8::from(observation.grasped())) + observation.lift())
 }
 
 /// Staged shaping in [0, 0.8]: approach the cube, grasp it, lift it, carry it over the bin. Each
 /// stage adds up to 0.2, so any unfinished episode scores below success (1.0).
 fn cube_to_bin_shaping(observation: &TaskObservation) -> f64 {
-    let approach = 1.0 - (10.0 * observation.tip_to_cube()).tanh();
-    let grasped = observation.grasped();
-    let lift = if grasped {
-        ((observation.cube.z - observation.cube_rest_height) / LIFT_HEIGHT).clamp(0.0, 1.0)
-    } else {
-        0.0
-    };
-    let place = if lift > 0.0 {
+    let place = if observation.lift() > 0.0 {
         let horizontal = (observation.cube - observation.bin_goal).xy().norm();
         1.0 - (10.0 * horizontal).tanh()
     } else {
         0.0
     };
-    0.2 * (approach + f64::from(u8::from(grasped)) + lift + place)
+    approach_grasp_lift(observation) + 0.2 * place
 }
 
 #[cfg(test)]
@@ -189,6 +212,31 @@ mod tests {
         assert!(!evaluate(TaskKind::CubeToBin, false, &obs).success);
         obs.cube = Vector3::new(0.0, 0.25, 0.09);
         assert!(!evaluate(TaskKind::CubeToBin, false, &obs).success);
+    }
+
+    #[test]
+    fn lift_cube_succeeds_only_held_in_both_jaws_high_enough() {
+        let mut obs = observation();
+        obs.gripper_tip = obs.cube;
+        obs.cube.z += LIFT_HEIGHT;
+        // Lifted but not held (thrown, or resting on something): no success.
+        obs.fixed_jaw_contact = true;
+        assert!(!evaluate(TaskKind::LiftCube, false, &obs).success);
+        obs.moving_jaw_contact = true;
+        assert_eq!(
+            evaluate(TaskKind::LiftCube, true, &obs),
+            TaskOutcome {
+                reward: 1.0,
+                success: true
+            }
+        );
+        // Held, 1 cm short: the dense reward grows with the height, below success.
+        obs.cube.z -= 0.01;
+        let short = evaluate(TaskKind::LiftCube, true, &obs);
+        obs.cube.z -= 0.02;
+        let lower = evaluate(TaskKind::LiftCube, true, &obs);
+        assert!(!short.success && lower.reward < short.reward && short.reward < 0.6 + 1e-12);
+        assert_eq!(evaluate(TaskKind::LiftCube, false, &obs).reward, 0.0);
     }
 
     #[test]

@@ -99,9 +99,13 @@ pub struct Args {
     /// Expert: where to drop the cube (world frame; the sim scene's bin centre by default), m.
     #[arg(long, default_value = "0.10,-0.22,0.77", value_parser = so101_core::cli_values::parse_point)]
     pub bin_xyz: [f64; 3],
-    /// Task text of the episodes (the recorder's metadata, LeRobot's task).
-    #[arg(long, default_value = TaskKind::CubeToBin.facts().description)]
-    pub task: String,
+    /// Expert: the task it plays (the sim node's --task).
+    #[arg(long, value_enum, default_value_t = TaskKind::CubeToBin)]
+    pub sim_task: TaskKind,
+    /// Task text of the episodes (the recorder's metadata, LeRobot's task); default: the
+    /// --sim-task's.
+    #[arg(long)]
+    pub task: Option<String>,
     /// Write a JSON summary here at exit (the expert's episode results).
     #[arg(long)]
     pub report: Option<PathBuf>,
@@ -110,6 +114,15 @@ pub struct Args {
     pub duration: Option<f64>,
     #[command(flatten)]
     pub node: NodeArgs,
+}
+
+impl Args {
+    /// The episodes' task text: --task, else the --sim-task's description.
+    pub fn task_text(&self) -> String {
+        self.task
+            .clone()
+            .unwrap_or_else(|| self.sim_task.facts().description.to_owned())
+    }
 }
 
 fn parse_positive(what: &'static str, max: f64) -> impl Fn(&str) -> Result<f64, String> + Clone {

@@ -181,11 +181,12 @@ fn open_source(args: &Args, node: &mut RosNode) -> Result<Box<dyn Source>> {
                 Vector3::from(args.bin_xyz),
                 args.waypoint_noise,
                 args.action_noise,
-            );
+            )
+            .for_task(args.sim_task);
             Box::new(Expert::new(
                 config,
                 base,
-                args.task.clone(),
+                args.task_text(),
                 args.seed,
                 (args.episodes > 0).then_some(args.episodes),
                 !args.no_reset,

@@ -92,7 +92,8 @@ pub fn declarations(args: &Args) -> Parameters {
         options.declare("no_reset", Value::Bool(args.no_reset)),
         options.declare("base_xyz", Value::DoubleArray(args.base_xyz.to_vec())),
         options.declare("bin_xyz", Value::DoubleArray(args.bin_xyz.to_vec())),
-        options.declare("task", text(&args.task)),
+        options.declare("task", text(&args.task_text())),
+        options.declare("sim_task", text(args.sim_task.name())),
     ])
 }
 

@@ -55,6 +55,15 @@ TASKS = {
         reward_modes=("sparse", "dense"),
         control_rate=30.0,
     ),
+    "lift_cube": Task(
+        name="lift_cube",
+        gym_id="so101/LiftCube-v0",
+        description="lift the cube",
+        episode_steps=300,
+        terminates_on_success=True,
+        reward_modes=("sparse", "dense"),
+        control_rate=30.0,
+    ),
     "touch_cube": Task(
         name="touch_cube",
         gym_id="so101/TouchCube-v0",

@@ -6,6 +6,7 @@ use rand::SeedableRng;
 
 pub fn sim_config() -> ExpertConfig {
     ExpertConfig {
+        task: TaskKind::CubeToBin,
         bin: Vector3::new(0.10, -0.22, 0.02),
         table_z: 0.0,
         gripper_open: 0.9,
@@ -111,6 +112,47 @@ fn the_plan_ends_open_over_the_bin_inside_the_limits() {
         "{over:?}"
     );
     assert!(end[5] > 0.8);
+}
+
+#[test]
+fn each_task_ends_where_it_asks_the_lift_held_and_the_touch_open_at_the_cube() {
+    let cube = Vector3::new(0.22, 0.04, 0.015);
+    for task in [
+        TaskKind::LiftCube,
+        TaskKind::TouchCube,
+        TaskKind::TouchCubeSparse,
+    ] {
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(3);
+        let config = sim_config().for_task(task);
+        let mut plan = Plan::new(&[0.0; 6], cube, 0.2, &config, &mut rng).unwrap();
+        let mut arm = [0.0; 6];
+        let mut closed_at_the_cube = false;
+        while !plan.finished() {
+            arm = plan.step(PERIOD, &arm, None, &config, &mut rng);
+            arm[5] = arm[5].max(HOLDING);
+            let at: ArmPositions = std::array::from_fn(|j| arm[j]);
+            let near = (kinematics::task_pose(&at).position.xy() - cube.xy()).norm() < 0.015;
+            closed_at_the_cube |= near && arm[5] < 0.5;
+        }
+        let end: ArmPositions = std::array::from_fn(|j| arm[j]);
+        let tip = kinematics::task_pose(&end).position;
+        // Never over the bin, wherever the task ends.
+        assert!((tip.xy() - cube.xy()).norm() < 0.015, "{task}: {tip:?}");
+        if task == TaskKind::LiftCube {
+            // Closed on the cube, then held high above the table, still closed.
+            assert!(
+                closed_at_the_cube && arm[5] < 0.5 && tip.z > cube.z + 0.08,
+                "{task}: {tip:?} {arm:?}"
+            );
+        } else {
+            // The jaws stay open at the cube.
+            assert!(
+                !closed_at_the_cube && arm[5] > 0.8 && tip.z < cube.z + 0.01,
+                "{task}: {tip:?} {arm:?}"
+            );
+        }
+        assert!(plan.duration() < 5.0, "{task}: {}", plan.duration());
+    }
 }
 
 #[test]

@@ -1,8 +1,9 @@
-"""The scripted cube_to_bin expert in-process, as a policy over the Gymnasium environments'
+"""The scripted expert of every task in-process, as a policy over the Gymnasium environments'
 observations (so101.envs): demonstrations for behaviour cloning at simulation speed.
 
 It is teleop_node's expert (the planner in so101_core::expert, called through so101_native):
-from the settled cube's pose, a grasp from above, a lift, a carry over the bin and a release, as
+from the settled cube's pose, a grasp from above, then the task's part (cube_to_bin: a lift, a
+carry over the bin and a release; lift_cube: a lift, held; the touch tasks: the jaws at the cube), as
 timed waypoints turned into joint targets by the shared IK, each target moved at most `max_step`
 rad per period. The plan waits at its gates for the arm it observes (the grasp reached, the
 gripper closed, the arm over the bin) and goes back up to grasp again (at most twice) when a jaw
@@ -32,10 +33,13 @@ class ExpertPolicy:
         seed: int = 0,
         max_step: float = 0.1,
         control_rate: float = contract.CONTROL_RATE,
+        task: str = "cube_to_bin",
     ):
         import so101_native
 
-        self._expert = so101_native.Expert(waypoint_noise=waypoint_noise, action_noise=action_noise, seed=seed, max_step=max_step)
+        self._expert = so101_native.Expert(
+            waypoint_noise=waypoint_noise, action_noise=action_noise, seed=seed, max_step=max_step, task=task
+        )
         self._period = 1.0 / control_rate
         self.duration = 0.0
 
@@ -61,7 +65,7 @@ class ExpertPolicy:
 
     @property
     def done(self) -> bool:
-        """The plan has been played to its end (the cube released over the bin)."""
+        """The plan has been played to its end (for cube_to_bin: the cube released over the bin)."""
         return self._expert.finished
 
     @property

@@ -34,6 +34,7 @@ REPO_ID = "local/so101_demos"
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--episodes", type=int, default=50, help="demonstrations to record")
+    p.add_argument("--task", choices=list(contract.TASKS), default="cube_to_bin", help="the task the expert demonstrates")
     p.add_argument(
         "--backend",
         choices=["ros", "inprocess"],
@@ -86,6 +87,7 @@ def launch_command(args, output: Path) -> list[str]:
         "--robot=sim",
         "--control=expert",
         f"--episodes={args.episodes}",
+        f"--task={args.task}",
         f"--seed={args.seed}",
         "--record",
         f"--bags={output / 'bags'}",
@@ -166,6 +168,7 @@ def run_inprocess(args, output: Path) -> int:
         randomize=args.randomize,
         camera_poses=args.camera_poses,
         repo_id=args.repo_id,
+        task=args.task,
         action_space=args.action_space,
     )
     output.mkdir(parents=True, exist_ok=True)

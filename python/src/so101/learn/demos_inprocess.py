@@ -163,7 +163,10 @@ def record_share(options: Options, first: int, count: int, root: str, workers: i
             observation, info = env.reset()
         settings = info["episode_settings"]
         expert = ExpertPolicy(
-            waypoint_noise=options.waypoint_noise, action_noise=options.action_noise, seed=expert_seed(options.seed, episode)
+            waypoint_noise=options.waypoint_noise,
+            action_noise=options.action_noise,
+            seed=expert_seed(options.seed, episode),
+            task=options.task,
         )
         try:
             expert.reset(observation)

@@ -230,7 +230,10 @@ def parser() -> argparse.ArgumentParser:
     p.add_argument("--namespace", default="", help="put every node under /NAMESPACE/")
     p.add_argument("--seed", type=int, default=0, help="sim and expert seed")
     p.add_argument(
-        "--task", default=contract.TASKS["cube_to_bin"].description, help="task text of the recorded episodes (the expert's task)"
+        "--task",
+        default="cube_to_bin",
+        help=f"the task ({', '.join(contract.TASKS)}): the sim scores it, the expert plays it, the recorded "
+        "episodes carry its text; any other text is the episodes' text for cube_to_bin",
     )
     p.add_argument("--log-dir", default=None, help="node logs (default logs/launch-<time>/)")
     p.add_argument("--ready-timeout", type=float, default=30.0, help="seconds a node may take to come up")

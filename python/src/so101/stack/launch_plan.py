@@ -57,9 +57,18 @@ class NodeSpec:
     env: dict[str, str] | None = None  # its whole environment (default: node_environment())
 
 
+def task_of(value: str) -> tuple[str, str]:
+    """--task: a task's name (contract.TASKS: the sim scores it, the expert plays it, the episodes
+    carry its text), or any other text for the episodes of cube_to_bin."""
+    if value in contract.TASKS:
+        return value, contract.TASKS[value].description
+    return "cube_to_bin", value
+
+
 def plan(args) -> list[NodeSpec]:
     """The processes of a profile, in start order."""
     specs: list[NodeSpec] = []
+    task, task_text = task_of(args.task)
     ns = ["--namespace", args.namespace] if args.namespace else []
     if args.robot == "sim":
         if args.camera:
@@ -69,6 +78,8 @@ def plan(args) -> list[NodeSpec]:
         sim = [str(node_binary("so101_sim_node")), "--seed", str(args.seed), *ns]
         if args.lite:
             sim.append("--lite")
+        if task != "cube_to_bin":
+            sim += ["--task", task]
         if args.speed:
             sim += ["--speed", args.speed]
         extra = shlex.split(args.sim_args)
@@ -141,7 +152,7 @@ def plan(args) -> list[NodeSpec]:
         )
 
     if args.record:
-        recorder = [str(node_binary("recorder_node")), "--output", args.bags, "--task", args.task, *ns]
+        recorder = [str(node_binary("recorder_node")), "--output", args.bags, "--task", task_text, *ns]
         if args.control == "policy" and not args.episode_time:
             recorder.append("--start")  # no one marks episodes: one from start to stop
         extra = shlex.split(args.recorder_args)
@@ -156,7 +167,8 @@ def plan(args) -> list[NodeSpec]:
         if args.control == "expert":
             if args.robot != "sim":
                 raise SystemExit("so101-launch: the scripted expert needs the sim (it reads /cube/pose)")
-            teleop += ["--source", "expert", "--sim-time", "--seed", str(args.seed), "--task", args.task]
+            teleop += ["--source", "expert", "--sim-time", "--seed", str(args.seed), "--task", task_text]
+            teleop += ["--sim-task", task]
             if args.episodes:
                 teleop += ["--episodes", str(args.episodes)]
         else:
