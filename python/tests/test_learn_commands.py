@@ -76,14 +76,35 @@ def test_lerobot_train_gets_the_whole_preset_and_extra_arguments_last(recipe, tm
     assert command[-1] == "--policy.foo=1"
 
 
+def dataset_of_tasks(root: Path, *texts: str) -> Path:
+    """A dataset's meta/tasks.parquet as LeRobot writes it (the task texts as the index)."""
+    import pandas as pd
+
+    (root / "meta").mkdir(parents=True)
+    pd.DataFrame({"task_index": range(len(texts))}, index=pd.Index(texts, name="task")).to_parquet(
+        root / "meta" / "tasks.parquet"
+    )
+    return root
+
+
 def test_evaluation_goes_through_the_runner_on_unseen_seeds(tmp_path):
+    dataset_of_tasks(tmp_path, "put the cube in the bin")
     args = parse("act", "--dataset", str(tmp_path), "--eval", "100")
     command = lerobot_train.eval_command(args, tmp_path / "model", tmp_path / "eval")
+    assert "--sim-task=cube_to_bin" in command
     assert command[command.index("-m") + 1] == "so101.evaluate.run_policy"
     assert "--eval=100" in command and "--seed=1000" in command and "--backend=ros" in command
     assert "--videos=10" in command
     # Outside a network namespace (as here) the runner is put inside one.
     assert Path(command[0]).name == "isolated"
+
+
+def test_the_recipe_evaluates_on_the_task_of_the_datasets_text(tmp_path):
+    for texts, task in ((["lift the cube"], "lift_cube"), (["lift the cube", "put the cube in the bin"], "cube_to_bin")):
+        root = dataset_of_tasks(tmp_path / str(len(texts)), *texts)
+        args = parse("act", "--dataset", str(root), "--eval", "10")
+        command = lerobot_train.eval_command(args, tmp_path / "model", tmp_path / "eval")
+        assert f"--sim-task={task}" in command, command
 
 
 def test_diffusion_scales_actions_into_its_samplers_clip_range_act_by_mean_and_std(tmp_path):

@@ -357,7 +357,12 @@ def parser() -> argparse.ArgumentParser:
     ev = p.add_argument_group("evaluation (own sim in lockstep)")
     ev.add_argument("--eval", type=int, default=0, metavar="N", help="evaluate over N seeded episodes instead")
     ev.add_argument("--seed", type=int, default=0, help="seed of the first episode (then seed+1, ...)")
-    ev.add_argument("--episode-time", type=float, default=20.0, help="sim seconds before an episode counts as failed")
+    ev.add_argument(
+        "--episode-time",
+        type=float,
+        default=None,
+        help="sim seconds before an episode counts as failed (default: the --sim-task's episode length)",
+    )
     ev.add_argument(
         "--sim-task",
         default="cube_to_bin",
@@ -410,6 +415,9 @@ def main(argv: list[str] | None = None) -> int:
         raise SystemExit("so101-run-policy: --fps must be positive")
     if args.videos is not None and args.videos < 0:
         raise SystemExit("so101-run-policy: --videos must not be negative")
+    if args.episode_time is None:
+        facts = contract.TASKS[args.sim_task]
+        args.episode_time = facts.episode_steps / facts.control_rate
     if args.episode_time <= 0:
         raise SystemExit("so101-run-policy: --episode-time must be positive")
     if args.workers < 1:

@@ -33,6 +33,7 @@ import sys
 import time
 from pathlib import Path
 
+from .. import contract
 from ..paths import repo_root
 from .eval_recipe import run_policy_command
 
@@ -266,6 +267,18 @@ def launcher(args) -> list[str]:
     ]
 
 
+def dataset_task(dataset: Path) -> str:
+    """The contract's task whose text the dataset's episodes carry (the one the recipe evaluates
+    on); cube_to_bin for a dataset of several tasks or of a text no task has."""
+    import pandas as pd
+
+    texts = list(pd.read_parquet(Path(dataset) / "meta" / "tasks.parquet").index)
+    tasks = [name for name, facts in contract.TASKS.items() if [facts.description] == texts]
+    if not tasks:
+        print(f"so101-learn: the dataset's tasks {texts} are no single task of the sim: evaluating on cube_to_bin")
+    return tasks[0] if tasks else "cube_to_bin"
+
+
 def eval_command(args, checkpoint: Path, eval_dir: Path) -> list[str]:
     # MP4s of the first episodes only: filming costs more than the rest of an episode.
     return run_policy_command(
@@ -274,6 +287,7 @@ def eval_command(args, checkpoint: Path, eval_dir: Path) -> list[str]:
         seed=args.eval_seed,
         output=str(eval_dir),
         backend=args.eval_backend,
+        sim_task=dataset_task(args.dataset),
         videos=min(args.eval, args.eval_videos),
         lite=True,
         device=args.device,
