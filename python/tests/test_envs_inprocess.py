@@ -175,3 +175,22 @@ def test_the_expert_lifts_the_cube_and_holds_it():
         successes.append(info["is_success"])
     assert not successes[-1]  # released over the bin: not held
     env.close()
+
+
+def test_the_expert_places_the_cube_on_the_pad():
+    env = gym.make("so101/PlaceCube-v0", dense_reward=True)
+    for seed in (2, 7):
+        observation, _ = env.reset(seed=seed)
+        expert = ExpertPolicy(waypoint_noise=0.003, action_noise=0.005, seed=seed, task="place_cube")
+        expert.reset(observation)
+        held_high = False
+        for _ in range(600):
+            observation, reward, terminated, truncated, info = env.step(expert(observation))
+            held_high |= observation["environment_state"][2] > 0.8  # carried, 3 cm and more above the table
+            if terminated:
+                break
+        assert terminated and info["is_success"] and reward == 1.0 and held_high, seed
+        # Resting on the table, left of the arm (the pad at y = 0.18 m).
+        assert abs(observation["environment_state"][1] - 0.18) < 0.025
+        assert observation["environment_state"][2] < 0.77
+    env.close()

@@ -1,6 +1,6 @@
 //! The scripted expert of every task: from the cube's pose, a grasp from above with the jaws
 //! across two faces of the cube, then what the task asks (cube_to_bin: a lift, a move over the bin
-//! and a release; lift_cube: a lift, held; the touch tasks: the jaws at the cube, held), as timed
+//! and a release; place_cube: the same down onto the pad; lift_cube: a lift, held; the touch tasks: the jaws at the cube, held), as timed
 //! task-space waypoints that the shared IK turns into joint targets every control period. Noise on the
 //! waypoints and on the joint targets (as in the ALOHA scripted policies) makes the
 //! demonstrations varied. Pure: no I/O.
@@ -23,6 +23,8 @@ pub struct ExpertConfig {
     pub task: TaskKind,
     /// Where a released cube should drop: above the bin's centre.
     pub bin: Vector3<f64>,
+    /// Where place_cube puts the cube down: the pad's centre.
+    pub pad: Vector3<f64>,
     /// Height of the table top.
     pub table_z: f64,
     /// Gripper targets (rad).
@@ -38,6 +40,8 @@ pub struct ExpertConfig {
 
 /// Where the sim scene's bin centre is (world frame, m): the expert drops the cube above it.
 pub const SIM_BIN_IN_WORLD: [f64; 3] = [0.10, -0.22, 0.77];
+/// Where the sim scene's place_cube pad is (world frame, m; its `place_pad` site).
+pub const SIM_PAD_IN_WORLD: [f64; 3] = [0.20, 0.18, 0.765];
 /// Height of the sim scene's table top (world frame, m).
 pub const SIM_TABLE_Z: f64 = 0.75;
 /// Seconds an expert episode goes on once the task succeeds (its recording ends on the success).
@@ -61,6 +65,7 @@ impl ExpertConfig {
         Self {
             task: TaskKind::CubeToBin,
             bin: bin_in_world - base_in_world,
+            pad: Vector3::from(SIM_PAD_IN_WORLD) - base_in_world,
             table_z: SIM_TABLE_Z - base_in_world.z,
             gripper_open: GRIPPER_OPEN,
             gripper_closed: GRIPPER_CLOSED,
@@ -121,11 +126,12 @@ const EMPTY_GRIP: f64 = 0.15;
 /// Regrasps an episode tries at most.
 const MAX_REGRASPS: u32 = 2;
 
-/// Where the cube goes once held: the poses of the carry (base frame).
+/// Where the cube goes once held: the poses of the carry (base frame), over the bin (cube_to_bin)
+/// or the pad (place_cube).
 #[derive(Debug, Clone, Copy)]
 struct Carry {
     lifted: TaskPose,
-    over_bin: TaskPose,
+    over_goal: TaskPose,
     release: TaskPose,
     leave: TaskPose,
 }
@@ -173,6 +179,8 @@ const GRASP_ABOVE_TABLE: f64 = 0.017;
 const APPROACH_ABOVE_CUBE: f64 = 0.06;
 const CARRY_ABOVE_TABLE: f64 = 0.13;
 const RELEASE_ABOVE_TABLE: f64 = 0.095;
+/// place_cube lets go with the cube this far above the table, m.
+const PLACE_CLEARANCE: f64 = 0.006;
 /// Sideways room between the fixed jaw's pad and the cube on the way down, m.
 const JAW_CLEARANCE: f64 = 0.007;
 /// Grasp pitches tried in order: straight down first, then tilted (far or near the base).
@@ -249,12 +257,16 @@ impl Plan {
         let above = |position: Vector3<f64>, height: f64| {
             Vector3::new(position.x, position.y, config.table_z + height)
         };
-        let bin = config.bin + noise(rng);
+        let (goal, release_height) = match config.task {
+            TaskKind::PlaceCube => (config.pad, GRASP_ABOVE_TABLE + PLACE_CLEARANCE),
+            _ => (config.bin, RELEASE_ABOVE_TABLE),
+        };
+        let goal = goal + noise(rng);
         let carry = Carry {
             lifted: carry_pose(above(grasp.position, CARRY_ABOVE_TABLE)),
-            over_bin: carry_pose(above(bin, CARRY_ABOVE_TABLE)),
-            release: carry_pose(above(bin, RELEASE_ABOVE_TABLE)),
-            leave: carry_pose(above(bin, CARRY_ABOVE_TABLE + 0.03)),
+            over_goal: carry_pose(above(goal, CARRY_ABOVE_TABLE)),
+            release: carry_pose(above(goal, release_height)),
+            leave: carry_pose(above(goal, CARRY_ABOVE_TABLE + 0.03)),
         };
         let mut plan = Self {
             start: Waypoint {
@@ -287,7 +299,8 @@ impl Plan {
     }
 
     /// From wherever the arm is: above the grasp, down to it, then the task's part: close, lift,
-    /// carry, release (cube_to_bin); close, lift, hold (lift_cube); hold there (the touch tasks).
+    /// carry, release (cube_to_bin over the bin, place_cube down on the pad); close, lift, hold
+    /// (lift_cube); hold there (the touch tasks).
     fn pick_and_place(&self, grasp: TaskPose, approach_s: f64) -> Vec<Waypoint> {
         let (open, closed) = (self.gripper_open, self.gripper_closed);
         let waypoint = |pose: TaskPose, gripper: f64, duration: f64, gate: Gate| Waypoint {
@@ -311,10 +324,10 @@ impl Plan {
             waypoint(carry.lifted, closed, 1.0, Gate::None),
         ];
         let rest: Vec<Waypoint> = match self.task {
-            TaskKind::CubeToBin => grip_and_lift
+            TaskKind::CubeToBin | TaskKind::PlaceCube => grip_and_lift
                 .into_iter()
                 .chain([
-                    waypoint(carry.over_bin, closed, 1.5, Gate::None),
+                    waypoint(carry.over_goal, closed, 1.5, Gate::None),
                     waypoint(carry.release, closed, 0.5, Gate::Reached),
                     waypoint(carry.release, open, 0.5, Gate::None),
                     waypoint(carry.leave, open, 0.7, Gate::None),

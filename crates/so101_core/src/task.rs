@@ -23,6 +23,8 @@ pub enum TaskKind {
     CubeToBin,
     /// Sparse: reward 1 while the cube is held in both jaws, lifted (optional dense shaping).
     LiftCube,
+    /// Sparse: reward 1 once the cube rests on the pad, let go (optional dense shaping).
+    PlaceCube,
 }
 
 /// How a task's reward is given.
@@ -66,9 +68,10 @@ pub struct TaskFacts {
 
 impl TaskKind {
     /// Every task, in the order the command lines list them.
-    pub const ALL: [TaskKind; 4] = [
+    pub const ALL: [TaskKind; 5] = [
         Self::CubeToBin,
         Self::LiftCube,
+        Self::PlaceCube,
         Self::TouchCube,
         Self::TouchCubeSparse,
     ];
@@ -79,6 +82,7 @@ impl TaskKind {
             Self::TouchCube => &TOUCH_CUBE,
             Self::TouchCubeSparse => &TOUCH_CUBE_SPARSE,
             Self::LiftCube => &LIFT_CUBE,
+            Self::PlaceCube => &PLACE_CUBE,
         }
     }
 
@@ -113,6 +117,17 @@ const LIFT_CUBE: TaskFacts = TaskFacts {
     reward_modes: &[RewardMode::Sparse, RewardMode::Dense],
     control_rate_hz: CONTROL_RATE_HZ,
     help: "sparse: reward 1 once the cube is held in both jaws 5 cm above the table (dense: staged shaping)",
+};
+
+const PLACE_CUBE: TaskFacts = TaskFacts {
+    name: "place_cube",
+    gym_id: "so101/PlaceCube-v0",
+    description: "place the cube on the pad",
+    episode_steps: 600,
+    terminates_on_success: true,
+    reward_modes: &[RewardMode::Sparse, RewardMode::Dense],
+    control_rate_hz: CONTROL_RATE_HZ,
+    help: "sparse: reward 1 once the cube rests on the pad left of the arm, let go (dense: staged shaping)",
 };
 
 const TOUCH_CUBE: TaskFacts = TaskFacts {

@@ -36,6 +36,8 @@ pub struct TaskObservation {
     pub cube_rest_height: f64,
     pub bin_goal: Vector3<f64>,
     pub bin_inside: OrientedBox,
+    /// place_cube's pad: where a placed cube's centre rests.
+    pub place_pad: OrientedBox,
     /// The fixed jaw touches the cube.
     pub fixed_jaw_contact: bool,
     /// The moving jaw touches the cube.
@@ -66,6 +68,11 @@ impl TaskObservation {
         } else {
             0.0
         }
+    }
+
+    /// The cube let go on the pad: its centre over the pad, resting (no jaw touches it).
+    pub fn placed(&self) -> bool {
+        self.place_pad.contains(&self.cube) && !self.fixed_jaw_contact && !self.moving_jaw_contact
     }
 
     /// The cube held in both jaws, [`LIFT_HEIGHT`] above its rest: lift_cube's success.
@@ -99,7 +106,16 @@ pub fn evaluate(kind: TaskKind, dense_shaping: bool, observation: &TaskObservati
             let reward = match (success, dense_shaping) {
                 (true, _) => 1.0,
                 (false, false) => 0.0,
-                (false, true) => cube_to_bin_shaping(observation),
+                (false, true) => staged_shaping(observation, observation.bin_goal),
+            };
+            TaskOutcome { reward, success }
+        }
+        TaskKind::PlaceCube => {
+            let success = observation.placed();
+            let reward = match (success, dense_shaping) {
+                (true, _) => 1.0,
+                (false, false) => 0.0,
+                (false, true) => staged_shaping(observation, observation.place_pad.center),
             };
             TaskOutcome { reward, success }
         }
@@ -122,11 +138,11 @@ fn approach_grasp_lift(observation: &TaskObservation) -> f64 {
     0.2 * (approach + f64::from(u8::from(observation.grasped())) + observation.lift())
 }
 
-/// Staged shaping in [0, 0.8]: approach the cube, grasp it, lift it, carry it over the bin. Each
+/// Staged shaping in [0, 0.8]: approach the cube, grasp it, lift it, carry it over `goal`. Each
 /// stage adds up to 0.2, so any unfinished episode scores below success (1.0).
-fn cube_to_bin_shaping(observation: &TaskObservation) -> f64 {
+fn staged_shaping(observation: &TaskObservation, goal: Vector3<f64>) -> f64 {
     let place = if observation.lift() > 0.0 {
-        let horizontal = (observation.cube - observation.bin_goal).xy().norm();
+        let horizontal = (observation.cube - goal).xy().norm();
         1.0 - (10.0 * horizontal).tanh()
     } else {
         0.0
@@ -148,6 +164,11 @@ mod tests {
                 center: Vector3::new(0.0, 0.25, 0.04),
                 rotation: Matrix3::identity(),
                 half_extents: Vector3::new(0.05, 0.05, 0.04),
+            },
+            place_pad: OrientedBox {
+                center: Vector3::new(0.2, 0.18, 0.015),
+                rotation: Matrix3::identity(),
+                half_extents: Vector3::new(0.025, 0.025, 0.015),
             },
             fixed_jaw_contact: false,
             moving_jaw_contact: false,
@@ -237,6 +258,31 @@ mod tests {
         let lower = evaluate(TaskKind::LiftCube, true, &obs);
         assert!(!short.success && lower.reward < short.reward && short.reward < 0.6 + 1e-12);
         assert_eq!(evaluate(TaskKind::LiftCube, false, &obs).reward, 0.0);
+    }
+
+    #[test]
+    fn place_cube_succeeds_only_let_go_on_the_pad() {
+        let mut obs = observation();
+        assert!(!evaluate(TaskKind::PlaceCube, false, &obs).success);
+        obs.cube = Vector3::new(0.21, 0.17, 0.015);
+        obs.fixed_jaw_contact = true;
+        obs.moving_jaw_contact = true;
+        // Still held: not placed.
+        assert!(!evaluate(TaskKind::PlaceCube, false, &obs).success);
+        obs.fixed_jaw_contact = false;
+        obs.moving_jaw_contact = false;
+        assert_eq!(
+            evaluate(TaskKind::PlaceCube, true, &obs),
+            TaskOutcome {
+                reward: 1.0,
+                success: true
+            }
+        );
+        // Beside the pad, or dropped from above it (not resting yet): no.
+        obs.cube = Vector3::new(0.25, 0.18, 0.015);
+        assert!(!evaluate(TaskKind::PlaceCube, false, &obs).success);
+        obs.cube = Vector3::new(0.2, 0.18, 0.06);
+        assert!(!evaluate(TaskKind::PlaceCube, false, &obs).success);
     }
 
     #[test]

@@ -66,6 +66,7 @@ struct SceneIds {
     cube_site: usize,
     bin_goal_site: usize,
     bin_inside_site: usize,
+    place_pad_site: usize,
 }
 
 pub struct World {
@@ -145,6 +146,7 @@ impl World {
             cube_site: require(&sim, ObjectKind::Site, "cube_site")?,
             bin_goal_site: require(&sim, ObjectKind::Site, "bin_goal")?,
             bin_inside_site: require(&sim, ObjectKind::Site, "bin_inside")?,
+            place_pad_site: require(&sim, ObjectKind::Site, "place_pad")?,
         };
         let cube_rest_height = sim.qpos()[ids.cube_qpos + 2];
         let (mass, inertia) = sim.body_mass(ids.cube_body);
@@ -401,17 +403,18 @@ impl World {
             fixed_jaw_contact |= body == self.ids.fixed_jaw_body;
             moving_jaw_contact |= body == self.ids.moving_jaw_body;
         }
-        let inside = self.ids.bin_inside_site;
+        let region = |site| OrientedBox {
+            center: vector(site),
+            rotation: Matrix3::from_row_slice(&self.sim.site_rotation(site)),
+            half_extents: Vector3::from(self.sim.site_size(site)),
+        };
         TaskObservation {
             gripper_tip: vector(self.ids.gripper_tip_site),
             cube: vector(self.ids.cube_site),
             cube_rest_height: self.cube_rest_height,
             bin_goal: vector(self.ids.bin_goal_site),
-            bin_inside: OrientedBox {
-                center: vector(inside),
-                rotation: Matrix3::from_row_slice(&self.sim.site_rotation(inside)),
-                half_extents: Vector3::from(self.sim.site_size(inside)),
-            },
+            bin_inside: region(self.ids.bin_inside_site),
+            place_pad: region(self.ids.place_pad_site),
             fixed_jaw_contact,
             moving_jaw_contact,
         }

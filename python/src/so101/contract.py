@@ -64,6 +64,15 @@ TASKS = {
         reward_modes=("sparse", "dense"),
         control_rate=30.0,
     ),
+    "place_cube": Task(
+        name="place_cube",
+        gym_id="so101/PlaceCube-v0",
+        description="place the cube on the pad",
+        episode_steps=600,
+        terminates_on_success=True,
+        reward_modes=("sparse", "dense"),
+        control_rate=30.0,
+    ),
     "touch_cube": Task(
         name="touch_cube",
         gym_id="so101/TouchCube-v0",

@@ -8,6 +8,7 @@ pub fn sim_config() -> ExpertConfig {
     ExpertConfig {
         task: TaskKind::CubeToBin,
         bin: Vector3::new(0.10, -0.22, 0.02),
+        pad: Vector3::new(0.20, 0.18, 0.015),
         table_z: 0.0,
         gripper_open: 0.9,
         gripper_closed: -0.17,
@@ -153,6 +154,42 @@ fn each_task_ends_where_it_asks_the_lift_held_and_the_touch_open_at_the_cube() {
         }
         assert!(plan.duration() < 5.0, "{task}: {}", plan.duration());
     }
+}
+
+#[test]
+fn place_cube_sets_the_cube_down_on_the_pad_and_lets_go() {
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(4);
+    let config = sim_config().for_task(TaskKind::PlaceCube);
+    let mut plan = Plan::new(
+        &[0.0; 6],
+        Vector3::new(0.24, -0.03, 0.015),
+        -0.3,
+        &config,
+        &mut rng,
+    )
+    .unwrap();
+    let mut arm = [0.0; 6];
+    let mut lowest_closed_over_the_pad = f64::INFINITY;
+    while !plan.finished() {
+        arm = plan.step(PERIOD, &arm, None, &config, &mut rng);
+        arm[5] = arm[5].max(HOLDING);
+        let at: ArmPositions = std::array::from_fn(|j| arm[j]);
+        let tip = kinematics::task_pose(&at).position;
+        if (tip.xy() - config.pad.xy()).norm() < 0.005 && arm[5] < 0.5 {
+            lowest_closed_over_the_pad = lowest_closed_over_the_pad.min(tip.z);
+        }
+    }
+    // Carried to the pad still closed, down to just above the table, then opened and away.
+    assert!(
+        (lowest_closed_over_the_pad - (GRASP_ABOVE_TABLE + PLACE_CLEARANCE)).abs() < 0.003,
+        "{lowest_closed_over_the_pad}"
+    );
+    let end: ArmPositions = std::array::from_fn(|j| arm[j]);
+    let tip = kinematics::task_pose(&end).position;
+    assert!(
+        (tip.xy() - config.pad.xy()).norm() < 0.01 && tip.z > 0.1 && arm[5] > 0.8,
+        "{tip:?}"
+    );
 }
 
 #[test]

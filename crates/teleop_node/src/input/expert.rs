@@ -247,17 +247,19 @@ impl Source for Expert {
                     *succeeded_at = Some(tick.now);
                 }
                 if let Some(at) = *succeeded_at {
-                    // The episode goes on a moment with the cube in the bin, so its recording
-                    // ends on the success it is marked with.
+                    // The episode goes on a moment with the task done, so its recording ends on
+                    // the success it is marked with.
                     if tick.now >= at + SUCCESS_SHOWN_SECONDS {
-                        self.finish(true, true, cube, "cube in the bin".into(), &mut controls);
+                        self.finish(true, true, cube, "the task succeeded".into(), &mut controls);
                     }
                 } else if tick.now > until {
                     let note = match tick.scene.cube {
                         Some(([x, y, z], _)) => {
-                            format!("the cube is not in the bin: it is at ({x:.3}, {y:.3}, {z:.3})")
+                            format!(
+                                "the task did not succeed: the cube is at ({x:.3}, {y:.3}, {z:.3})"
+                            )
                         }
-                        None => "the cube is not in the bin".into(),
+                        None => "the task did not succeed".into(),
                     };
                     self.finish(true, false, cube, note, &mut controls);
                 }

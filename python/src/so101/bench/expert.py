@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""Success rate of teleop_node's scripted expert on cube_to_bin: N seeded episodes against
+"""Success rate of teleop_node's scripted expert on a task (--task, cube_to_bin by default): N seeded episodes against
 so101_sim_node (sim time, --speed S), judged by the sim's /task/success (issue 4's target: >= 90 %
 over 50 episodes). Also the same episodes with waypoint and action noise, as used to make varied
 demonstrations.
@@ -18,6 +18,7 @@ import tempfile
 import time
 from pathlib import Path
 
+from so101 import contract
 from so101.bench import common as bench_common
 from so101.subcommands import Subcommand, run_alone
 
@@ -27,11 +28,19 @@ def node_env() -> dict:
 
 
 def run_expert(
-    bin_dir: Path, episodes: int, speed: float, sim_seed: int, expert_seed: int, noise: tuple[float, float], lite: bool
+    bin_dir: Path,
+    episodes: int,
+    speed: float,
+    sim_seed: int,
+    expert_seed: int,
+    noise: tuple[float, float],
+    lite: bool,
+    task: str = "cube_to_bin",
 ) -> dict:
     with tempfile.TemporaryDirectory() as work:
         report = Path(work) / "report.json"
         sim_args = [str(bin_dir / "so101_sim_node"), "--cameras", "none", "--speed", str(speed), "--seed", str(sim_seed)]
+        sim_args += ["--task", task]
         if lite:
             sim_args.append("--lite")
         sim = subprocess.Popen(sim_args, env=node_env(), stderr=subprocess.DEVNULL)
@@ -53,6 +62,8 @@ def run_expert(
                     str(noise[1]),
                     "--report",
                     str(report),
+                    "--sim-task",
+                    task,
                 ],
                 env=node_env(),
                 stderr=subprocess.PIPE,
@@ -75,6 +86,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--speed", type=float, default=4.0, help="sim speed factor (the expert runs on sim time)")
     parser.add_argument("--seed", type=int, default=1, help="sim seed (cube placements)")
     parser.add_argument("--json", type=Path, default=None)
+    parser.add_argument("--task", choices=list(contract.TASKS), default="cube_to_bin", help="the task the expert plays")
 
 
 def run(args: argparse.Namespace) -> int:
@@ -84,7 +96,7 @@ def run(args: argparse.Namespace) -> int:
         "waypoint noise 5 mm, action noise 0.01 rad": (0.005, 0.01),
     }
     runs = {
-        label: run_expert(args.bin_dir, args.episodes, args.speed, args.seed, 1, noise, lite=False)
+        label: run_expert(args.bin_dir, args.episodes, args.speed, args.seed, 1, noise, lite=False, task=args.task)
         for label, noise in noises.items()
     }
     lines = [
@@ -106,7 +118,7 @@ def run(args: argparse.Namespace) -> int:
     return bench_common.report(lines, runs, args.json)
 
 
-SUBCOMMAND = Subcommand("the scripted expert's success rate on cube_to_bin against so101_sim_node", add_arguments, run, __doc__)
+SUBCOMMAND = Subcommand("the scripted expert's success rate on a task (cube_to_bin) against so101_sim_node", add_arguments, run, __doc__)
 
 
 def main(argv: list[str] | None = None) -> int:

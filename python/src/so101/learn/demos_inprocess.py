@@ -193,7 +193,7 @@ def record_share(options: Options, first: int, count: int, root: str, workers: i
             # One encoder process per camera and episode is LeRobot's default; beside other
             # workers it oversubscribes the cores (2 workers with 3 cameras: 3x one's time).
             write_episode(dataset, frames, success, task_text, options, parallel_encoding=workers == 1)
-        note = "cube in the bin" if success else "the cube is not in the bin"
+        note = "the task succeeded" if success else "the task did not succeed"
         recorded.append(Recorded(episode, success, len(frames["state"]), kept, note, settings, expert.regrasps))
     if dataset is not None:
         dataset.finalize()
