@@ -17,7 +17,7 @@ from bag_writer import EpisodeBag
 import so101  # noqa: F401 - registers the envs
 from so101.ee import EE_FEATURE_NAMES, ee_limits, ee_poses, lerobot_ee_from_ee
 from so101.envs.inprocess import default_scene
-from so101.units import JOINT_LIMITS, lerobot_from_radians, radians_from_lerobot
+from so101.units import JOINT_LIMITS, JOINT_NAMES, lerobot_from_radians, radians_from_lerobot
 
 
 def mujoco_grasp_points(joints: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -167,6 +167,37 @@ def test_the_converter_writes_end_effector_actions_and_state_lerobot_reads(tmp_p
         assert np.allclose(values, lerobot_ee_from_ee(ee_poses(joints_of)), atol=1e-4), ee_key
     # The commanded poses are all there, as end-effector targets.
     assert len({tuple(np.round(row, 4)) for row in column(ee, "action")}) == len(joints)
+    # so101-replay sends joint targets: it refuses end-effector ones instead of misreading them.
+    from so101.stack.replay import actions_from_dataset
+
+    with pytest.raises(SystemExit, match="end-effector targets"):
+        actions_from_dataset(tmp_path / "ee", "local/ee", 0, "lerobot")
+    assert actions_from_dataset(tmp_path / "joint", "local/joint", 0, "lerobot")[1].shape == (61, 6)
+
+
+def test_a_policy_s_actions_are_known_from_its_training_dataset(tmp_path):
+    import json
+
+    from so101.evaluate.policy import PolicyError, detected_action_space
+
+    def checkpoint(names, dataset_exists=True):
+        root = tmp_path / f"dataset_{len(list(tmp_path.iterdir()))}"
+        if dataset_exists:
+            (root / "meta").mkdir(parents=True)
+            (root / "meta" / "info.json").write_text(json.dumps({"features": {"action": {"names": names}}}))
+        model = root.with_name(root.name + "_model")
+        model.mkdir()
+        (model / "train_config.json").write_text(json.dumps({"dataset": {"root": str(root)}}))
+        return str(model)
+
+    # Recorded by lerobot-record with the robot type's action_space=ee: no observation.ee_state.
+    assert detected_action_space(checkpoint(EE_FEATURE_NAMES), reads_ee_state=False) == "ee"
+    assert detected_action_space(checkpoint([f"{j}.pos" for j in JOINT_NAMES]), reads_ee_state=False) == "joint"
+    # The dataset elsewhere (a Hub checkpoint): what the policy reads decides.
+    assert detected_action_space(checkpoint(EE_FEATURE_NAMES, dataset_exists=False), reads_ee_state=True) == "ee"
+    assert detected_action_space(str(tmp_path / "nowhere"), reads_ee_state=False) == "joint"
+    with pytest.raises(PolicyError, match="neither joint nor end-effector"):
+        detected_action_space(checkpoint(["a", "b"]), reads_ee_state=False)
 
 
 def test_the_robot_type_turns_an_end_effector_action_into_a_capped_joint_command():
@@ -194,3 +225,7 @@ def test_the_robot_type_turns_an_end_effector_action_into_a_capped_joint_command
     assert far.clamped and np.all((far.radians >= JOINT_LIMITS[:, 0]) & (far.radians <= JOINT_LIMITS[:, 1]))
     with pytest.raises(ValueError, match="ee.y"):
         command_from_ee_action({"ee.y": float("nan")}, hold, hold)
+    # Keys that are not its own (a joint action, LeRobot's ee.wx) are refused, not held.
+    for stranger in ({"shoulder_pan.pos": 10.0}, {"ee.x": start[0], "ee.wx": 0.1}):
+        with pytest.raises(ValueError, match="not end-effector ones"):
+            command_from_ee_action(stranger, hold, hold)

@@ -155,3 +155,20 @@ def test_a_timed_session_records_no_episode_by_itself(binaries, tmp_path):
     launch_plan.check_session(args)
     recorder = {spec.name: spec for spec in launch_plan.plan(args)}["recorder_node"].argv
     assert "--start" not in recorder
+
+
+@pytest.mark.parametrize(
+    "task, sim_task, text",
+    [
+        ("lift_cube", "lift_cube", "lift the cube"),
+        ("place-cube", "place_cube", "place the cube on the pad"),
+        ("lift the cube", "lift_cube", "lift the cube"),  # a task's own text names it
+        ("stack the blocks", "cube_to_bin", "stack the blocks"),  # any other text: cube_to_bin's episodes
+    ],
+)
+def test_the_task_is_scored_played_and_recorded_alike(binaries, task, sim_task, text):
+    nodes = argv_of(["--control", "expert", "--record", "--task", task])
+    sim, teleop, recorder = nodes["so101_sim_node"], nodes["teleop_node"], nodes["recorder_node"]
+    assert (sim[sim.index("--task") + 1] if "--task" in sim else "cube_to_bin") == sim_task
+    assert teleop[teleop.index("--sim-task") + 1] == sim_task and teleop[teleop.index("--task") + 1] == text
+    assert recorder[recorder.index("--task") + 1] == text

@@ -36,8 +36,8 @@ pub enum EeError {
 }
 
 /// The end-effector state of a joint configuration: forward kinematics of the arm, and the
-/// gripper's joint as it is. The roll is continuous over wrist_roll's whole range (about -1.2 to
-/// 4.4 rad), not wrapped at +-pi: the jaws' roll is a fixed offset minus wrist_roll, so a
+/// gripper's joint as it is. The roll is continuous over wrist_roll's whole range (it runs from
+/// about -1.2 to 4.4 rad), not wrapped at +-pi: the jaws' roll is a fixed offset minus wrist_roll, so a
 /// dataset's roll never jumps by a turn where the wrist crosses the wrap.
 pub fn ee_pose(joints: &JointPositions) -> EePose {
     let arm: ArmPositions = std::array::from_fn(|joint| joints[joint]);

@@ -181,6 +181,9 @@ const CARRY_ABOVE_TABLE: f64 = 0.13;
 const RELEASE_ABOVE_TABLE: f64 = 0.095;
 /// place_cube lets go with the cube this far above the table, m.
 const PLACE_CLEARANCE: f64 = 0.006;
+/// How far place_cube opens the jaws past closed to let go (holding the cube they stop about
+/// 0.35 rad past it), rad.
+const PLACE_OPENING: f64 = 0.6;
 /// Sideways room between the fixed jaw's pad and the cube on the way down, m.
 const JAW_CLEARANCE: f64 = 0.007;
 /// Grasp pitches tried in order: straight down first, then tilted (far or near the base).
@@ -314,6 +317,12 @@ impl Plan {
             ..grasp
         };
         let carry = self.carry;
+        // On the table the jaws open only as far as letting go takes: a wide swing of the moving
+        // jaw knocks the cube off where it was set down.
+        let let_go = match self.task {
+            TaskKind::PlaceCube => closed + PLACE_OPENING,
+            _ => open,
+        };
         let down = [
             waypoint(approach, open, approach_s, Gate::None),
             waypoint(grasp, open, 1.0, Gate::Grasp),
@@ -329,7 +338,7 @@ impl Plan {
                 .chain([
                     waypoint(carry.over_goal, closed, 1.5, Gate::None),
                     waypoint(carry.release, closed, 0.5, Gate::Reached),
-                    waypoint(carry.release, open, 0.5, Gate::None),
+                    waypoint(carry.release, let_go, 0.5, Gate::None),
                     waypoint(carry.leave, open, 0.7, Gate::None),
                 ])
                 .collect(),
@@ -454,9 +463,39 @@ impl Plan {
             }
         };
         if open || self.waited >= GATE_TIMEOUT {
+            if waypoint.gate == Gate::Gripped && self.task == TaskKind::PlaceCube {
+                if let Some((at, _)) = cube {
+                    // The cube sits off the grasp point in the jaws: set the cube, not the grasp
+                    // point, down on the pad.
+                    let grasp_point = kinematics::task_pose(&arm).position;
+                    let shift = held_offset_shift(grasp_point, at, self.carry.release.position);
+                    self.shift_goal(shift);
+                }
+            }
             self.next_gate = index + 1;
             self.waited = 0.0;
             self.progress = None;
+        }
+    }
+
+    /// Moves the carry's goal (over it, the release, the leave) by `offset`, in the carry's
+    /// poses and in the waypoints still to come.
+    fn shift_goal(&mut self, offset: Vector3<f64>) {
+        let old = self.carry;
+        let moved = |pose: TaskPose| carry_pose(pose.position + offset);
+        self.carry.over_goal = moved(old.over_goal);
+        self.carry.release = moved(old.release);
+        self.carry.leave = moved(old.leave);
+        for waypoint in &mut self.waypoints[self.next_gate..] {
+            for (before, after) in [
+                (old.over_goal, self.carry.over_goal),
+                (old.release, self.carry.release),
+                (old.leave, self.carry.leave),
+            ] {
+                if waypoint.pose == before {
+                    waypoint.pose = after;
+                }
+            }
         }
     }
 
@@ -544,6 +583,32 @@ impl Plan {
             JOINT_LIMITS[joint].clamp(value + normal(rng) * config.action_noise)
         })
     }
+}
+
+/// How far to move a goal of the grasp point so that the cube, held off it (at `cube` when the
+/// grasp point was at `grasp_point`), lands on the goal instead: the offset turns with the arm's
+/// heading on the way (it is fixed in the gripper, not in the base frame). Horizontal only.
+fn held_offset_shift(
+    grasp_point: Vector3<f64>,
+    cube: Vector3<f64>,
+    goal: Vector3<f64>,
+) -> Vector3<f64> {
+    let offset = Vector3::new(cube.x - grasp_point.x, cube.y - grasp_point.y, 0.0);
+    let turned = |to: &Vector3<f64>| {
+        let angle = kinematics::azimuth(to) - kinematics::azimuth(&grasp_point);
+        let (sin, cos) = angle.sin_cos();
+        Vector3::new(
+            cos * offset.x - sin * offset.y,
+            sin * offset.x + cos * offset.y,
+            0.0,
+        )
+    };
+    // Where the grasp point must go depends on the heading there: a few rounds settle it.
+    let mut target = goal - offset;
+    for _ in 0..3 {
+        target = goal - turned(&target);
+    }
+    Vector3::new(target.x - goal.x, target.y - goal.y, 0.0)
 }
 
 /// The grasp point at `position` pointing as steeply down as the arm reaches there (straight down

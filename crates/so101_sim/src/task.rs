@@ -9,6 +9,9 @@ pub use so101_core::task::TaskKind;
 /// Tip-to-cube-centre distance under which the gripper counts as touching the cube (m): half the
 /// 3 cm cube plus 1.5 cm for the finger pads.
 pub const TOUCH_DISTANCE: f64 = 0.03;
+/// How far from its resting height a placed cube's centre may be (m): down on the table, not
+/// still falling from the jaws nor leaning on an edge.
+pub const PLACED_HEIGHT_TOLERANCE: f64 = 0.003;
 /// Height above its resting height at which a grasped cube counts as fully lifted (m).
 pub const LIFT_HEIGHT: f64 = 0.05;
 
@@ -21,6 +24,13 @@ pub struct OrientedBox {
 }
 
 impl OrientedBox {
+    /// A region nothing is in.
+    pub const EMPTY: Self = Self {
+        center: Vector3::new(f64::INFINITY, f64::INFINITY, f64::INFINITY),
+        rotation: Matrix3::new(1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0),
+        half_extents: Vector3::new(0.0, 0.0, 0.0),
+    };
+
     pub fn contains(&self, point: &Vector3<f64>) -> bool {
         let local = self.rotation.transpose() * (point - self.center);
         (0..3).all(|axis| local[axis].abs() <= self.half_extents[axis])
@@ -70,9 +80,13 @@ impl TaskObservation {
         }
     }
 
-    /// The cube let go on the pad: its centre over the pad, resting (no jaw touches it).
+    /// The cube let go on the pad: its centre over the pad, down at its resting height (not
+    /// falling, not tipped onto an edge), no jaw touching it.
     pub fn placed(&self) -> bool {
-        self.place_pad.contains(&self.cube) && !self.fixed_jaw_contact && !self.moving_jaw_contact
+        self.place_pad.contains(&self.cube)
+            && (self.cube.z - self.cube_rest_height).abs() < PLACED_HEIGHT_TOLERANCE
+            && !self.fixed_jaw_contact
+            && !self.moving_jaw_contact
     }
 
     /// The cube held in both jaws, [`LIFT_HEIGHT`] above its rest: lift_cube's success.
@@ -278,10 +292,16 @@ mod tests {
                 success: true
             }
         );
-        // Beside the pad, or dropped from above it (not resting yet): no.
+        // A scene without a pad: nowhere is placed.
+        let padless = TaskObservation {
+            place_pad: OrientedBox::EMPTY,
+            ..obs
+        };
+        assert!(!evaluate(TaskKind::PlaceCube, false, &padless).success);
+        // Beside the pad, or dropped from above it (still falling, 5 mm up): no.
         obs.cube = Vector3::new(0.25, 0.18, 0.015);
         assert!(!evaluate(TaskKind::PlaceCube, false, &obs).success);
-        obs.cube = Vector3::new(0.2, 0.18, 0.06);
+        obs.cube = Vector3::new(0.2, 0.18, 0.02);
         assert!(!evaluate(TaskKind::PlaceCube, false, &obs).success);
     }
 

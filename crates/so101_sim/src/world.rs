@@ -66,7 +66,8 @@ struct SceneIds {
     cube_site: usize,
     bin_goal_site: usize,
     bin_inside_site: usize,
-    place_pad_site: usize,
+    /// place_cube's pad; a scene without one offers no place to set the cube down.
+    place_pad_site: Option<usize>,
 }
 
 pub struct World {
@@ -146,7 +147,7 @@ impl World {
             cube_site: require(&sim, ObjectKind::Site, "cube_site")?,
             bin_goal_site: require(&sim, ObjectKind::Site, "bin_goal")?,
             bin_inside_site: require(&sim, ObjectKind::Site, "bin_inside")?,
-            place_pad_site: require(&sim, ObjectKind::Site, "place_pad")?,
+            place_pad_site: sim.id(ObjectKind::Site, "place_pad"),
         };
         let cube_rest_height = sim.qpos()[ids.cube_qpos + 2];
         let (mass, inertia) = sim.body_mass(ids.cube_body);
@@ -414,7 +415,7 @@ impl World {
             cube_rest_height: self.cube_rest_height,
             bin_goal: vector(self.ids.bin_goal_site),
             bin_inside: region(self.ids.bin_inside_site),
-            place_pad: region(self.ids.place_pad_site),
+            place_pad: self.ids.place_pad_site.map_or(OrientedBox::EMPTY, region),
             fixed_jaw_contact,
             moving_jaw_contact,
         }

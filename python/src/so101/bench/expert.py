@@ -118,7 +118,9 @@ def run(args: argparse.Namespace) -> int:
     return bench_common.report(lines, runs, args.json)
 
 
-SUBCOMMAND = Subcommand("the scripted expert's success rate on a task (cube_to_bin) against so101_sim_node", add_arguments, run, __doc__)
+SUBCOMMAND = Subcommand(
+    "the scripted expert's success rate on a task (cube_to_bin) against so101_sim_node", add_arguments, run, __doc__
+)
 
 
 def main(argv: list[str] | None = None) -> int:

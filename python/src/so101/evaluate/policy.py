@@ -3,7 +3,9 @@ radians and RGB frames in, joint targets in radians out. The policy's own pre- a
 (normalization, device) run as lerobot-train saved them; this module only maps the stack's values
 onto the policy's features and back. A policy that acts in end-effector space (so101.ee; trained on
 a dataset converted with --action-space ee, which gives it observation.ee_state) gets its targets
-turned into joint targets by the core's IK here, so every caller drives joints the same way."""
+turned into joint targets by the core's IK here, so every caller drives joints the same way;
+which actions a policy gives is read from its training dataset's action names where that dataset
+is on this machine (detected_action_space)."""
 
 from __future__ import annotations
 
@@ -94,10 +96,8 @@ class StackPolicy:
         self.needs_ee_state = EE_STATE in inputs
         if self.needs_ee_state and tuple(inputs[EE_STATE].shape) != (6,):
             raise PolicyError(f"the policy's {EE_STATE} is {inputs[EE_STATE]}, not the end-effector state (6 values)")
-        # auto: a policy that reads the end-effector state was trained on a dataset whose actions
-        # are end-effector targets (the converter writes both or neither).
         if action_space == "auto":
-            action_space = "ee" if self.needs_ee_state else "joint"
+            action_space = detected_action_space(source, self.needs_ee_state)
         try:
             self.action_space = checked_action_space(action_space)
         except ValueError as error:
@@ -183,6 +183,26 @@ class StackPolicy:
                 "end-effector target %s out of reach by %.3f m: the nearest pose commanded", ee_target, steps.position_error[0]
             )
         return steps.targets[0]
+
+
+def detected_action_space(source: str, reads_ee_state: bool) -> str:
+    """What the policy's actions are: the names of its training dataset's actions where the
+    checkpoint's train_config.json leads to the dataset on this machine (`ee.*`: end-effector
+    targets), else end-effector when it reads observation.ee_state (the converter's --action-space
+    ee writes both), else joint targets."""
+    import json
+
+    try:
+        dataset = json.loads((Path(source) / "train_config.json").read_text())["dataset"]
+        info = json.loads((Path(dataset["root"]) / "meta" / "info.json").read_text())
+        names = info["features"]["action"]["names"]
+    except (OSError, KeyError, TypeError, ValueError):
+        return "ee" if reads_ee_state else "joint"
+    if all(str(name).startswith("ee.") for name in names):
+        return "ee"
+    if all(str(name).endswith(".pos") for name in names):
+        return "joint"
+    raise PolicyError(f"the policy's training actions {names} are neither joint nor end-effector targets")
 
 
 def resize(frame: np.ndarray, height: int, width: int) -> np.ndarray:

@@ -272,7 +272,10 @@ def dataset_task(dataset: Path) -> str:
     on); cube_to_bin for a dataset of several tasks or of a text no task has."""
     import pandas as pd
 
-    texts = list(pd.read_parquet(Path(dataset) / "meta" / "tasks.parquet").index)
+    try:
+        texts = list(pd.read_parquet(Path(dataset) / "meta" / "tasks.parquet").index)
+    except (OSError, ValueError):
+        texts = []
     tasks = [name for name, facts in contract.TASKS.items() if [facts.description] == texts]
     if not tasks:
         print(f"so101-learn: the dataset's tasks {texts} are no single task of the sim: evaluating on cube_to_bin")
@@ -337,5 +340,8 @@ def run(args) -> int:
             f"  success: {result['pc_success']:.0f} % over {result['episodes']} episodes (95 % interval {low:.0f}-{high:.0f} %), "
             f"mean reward {result['avg_sum_reward']:.2f}, best {result['best_sum_reward']:.2f}; videos in {output / 'eval'}"
         )
-    print(f"Evaluate again: scripts/isolated .venv/bin/so101-run-policy {checkpoint} --eval 100 --seed {args.eval_seed}")
+    print(
+        f"Evaluate again: scripts/isolated .venv/bin/so101-run-policy {checkpoint} --eval 100 --seed {args.eval_seed} "
+        f"--sim-task {dataset_task(args.dataset)}"
+    )
     return 0

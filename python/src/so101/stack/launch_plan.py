@@ -58,10 +58,15 @@ class NodeSpec:
 
 
 def task_of(value: str) -> tuple[str, str]:
-    """--task: a task's name (contract.TASKS: the sim scores it, the expert plays it, the episodes
-    carry its text), or any other text for the episodes of cube_to_bin."""
-    if value in contract.TASKS:
-        return value, contract.TASKS[value].description
+    """--task: a task's name, with underscores or dashes, or its text (contract.TASKS: the sim
+    scores it, the expert plays it, the episodes carry its text), or any other text for the
+    episodes of cube_to_bin."""
+    name = value.replace("-", "_")
+    if name in contract.TASKS:
+        return name, contract.TASKS[name].description
+    described = [task for task, facts in contract.TASKS.items() if facts.description == value]
+    if described:
+        return described[0], value
     return "cube_to_bin", value
 
 

@@ -24,6 +24,12 @@ def actions_from_dataset(root: Path, repo_id: str, episode: int, units: str) -> 
     from lerobot.datasets.lerobot_dataset import LeRobotDataset
 
     dataset = LeRobotDataset(repo_id, root=root, episodes=[episode])
+    names = dataset.meta.features["action"]["names"] or []
+    if any(str(name).startswith("ee.") for name in names):
+        raise SystemExit(
+            f"so101-replay: {root}'s actions are end-effector targets ({', '.join(names)}), not joint targets: "
+            "replay a dataset converted without --action-space ee"
+        )
     frames = dataset.hf_dataset.with_format("numpy")
     actions = np.asarray(frames["action"], dtype=np.float64)
     if len(actions) == 0:

@@ -70,10 +70,13 @@ def command_from_ee_action(
     target_in_force: np.ndarray | None = None,
 ) -> EeCommand:
     """The joint command for an end-effector action dict ("ee.x" ... "ee.gripper": m, rad,
-    gripper 0-100). Missing keys keep `target_in_force` (the last end-effector target asked for;
+    gripper 0-100; any other key is refused). Missing keys keep `target_in_force` (the last end-effector target asked for;
     default: the pose of `hold`), so a capped step does not become the new target. The IK starts
     from `hold` (the joint targets in force); its joint targets then pass command_from_action's
     checks, `max_relative_target` and limits, as a joint action's would."""
+    strangers = sorted(key for key in action if key not in EE_FEATURE_NAMES)
+    if strangers:
+        raise ValueError(f"action keys {strangers} are not end-effector ones ({', '.join(EE_FEATURE_NAMES)}): nothing sent")
     hold = np.asarray(hold, dtype=np.float64)
     if target_in_force is None:
         target_in_force = lerobot_ee_from_ee(ee_poses(hold))
