@@ -172,3 +172,8 @@ def test_the_task_is_scored_played_and_recorded_alike(binaries, task, sim_task, 
     assert (sim[sim.index("--task") + 1] if "--task" in sim else "cube_to_bin") == sim_task
     assert teleop[teleop.index("--sim-task") + 1] == sim_task and teleop[teleop.index("--task") + 1] == text
     assert recorder[recorder.index("--task") + 1] == text
+
+
+def test_a_policy_is_told_the_task(binaries):
+    runner = argv_of(["--control", "policy", "--policy", "some/policy", "--task", "lift_cube"])["so101-run-policy"]
+    assert runner[runner.index("--task") + 1] == "lift the cube" and runner[runner.index("--sim-task") + 1] == "lift_cube"

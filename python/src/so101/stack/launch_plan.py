@@ -186,6 +186,8 @@ def plan(args) -> list[NodeSpec]:
         if not args.policy:
             raise SystemExit("so101-launch: --control policy needs --policy (a checkpoint directory or a Hub id)")
         runner = [str(Path(sys.executable).parent / "so101-run-policy"), args.policy, *ns, "--quiet"]
+        # The episodes' text is what a language-conditioned policy is told to do.
+        runner += ["--sim-task", task, "--task", task_text]
         runner += shlex.split(args.policy_args)
         specs.append(NodeSpec("so101-run-policy", runner, ends_run=True))
     return specs
