@@ -75,7 +75,7 @@ def test_the_env_reaches_an_end_effector_target_and_reports_the_unreachable():
     far[0] = 0.9  # twice the arm's reach
     observation, _, _, _, info = env.step(far)
     assert info["ee_clamped"] and info["ee_position_error"] > 0.3
-    with pytest.raises(ValueError, match="six finite numbers"):
+    with pytest.raises(ValueError, match="six finite end-effector coordinates"):
         env.step(np.array([0.2, 0.0, np.nan, 0.0, 0.0, 0.0]))
     env.close()
 

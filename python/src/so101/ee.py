@@ -18,7 +18,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from . import contract
-from .units import JOINT_LIMITS, gripper_percent, gripper_radians
+from .units import JOINT_LIMITS, gripper_percent, gripper_radians, six_finite
 
 EE_NAMES = list(contract.EE_NAMES)
 # LeRobot's feature names of an end-effector action or state (dataset columns, robot features).
@@ -74,10 +74,7 @@ def ee_limits() -> np.ndarray:
 
 
 def checked_ee_action(action) -> np.ndarray:
-    action = np.asarray(action, dtype=np.float64).reshape(-1)
-    if action.shape != (6,) or not np.all(np.isfinite(action)):
-        raise ValueError(f"an end-effector action is six finite numbers ({', '.join(EE_NAMES)}), not {action}")
-    return action
+    return six_finite(action, f"end-effector coordinates ({', '.join(EE_NAMES)})")
 
 
 @dataclass(frozen=True)

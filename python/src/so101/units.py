@@ -18,6 +18,14 @@ JOINT_LIMITS = np.array(contract.JOINT_LIMITS)
 GRIPPER_CLOSED, GRIPPER_OPEN = contract.JOINT_LIMITS[-1]
 
 
+def six_finite(values, what: str) -> np.ndarray:
+    """`values` as six finite float64s (an action), else ValueError saying they should be `what`."""
+    values = np.asarray(values, dtype=np.float64).reshape(-1)
+    if values.shape != (6,) or not np.all(np.isfinite(values)):
+        raise ValueError(f"an action is six finite {what}, not {values}")
+    return values
+
+
 def gripper_percent(radians):
     """The gripper's joint (rad) -> its position in its range as 0-100 (LeRobot's RANGE_0_100)."""
     return (radians - GRIPPER_CLOSED) / (GRIPPER_OPEN - GRIPPER_CLOSED) * 100.0

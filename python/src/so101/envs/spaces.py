@@ -14,7 +14,7 @@ import numpy as np
 from gymnasium import spaces
 
 from .. import contract
-from ..units import JOINT_LIMITS
+from ..units import JOINT_LIMITS, six_finite
 
 # The parts of the 19-vector the simulation core reports (joints, velocities, cube pose).
 STATE = {"agent_pos": slice(0, 6), "agent_vel": slice(6, 12), "environment_state": slice(12, 19)}
@@ -61,7 +61,4 @@ def observation_from_state(state: np.ndarray, pixels: dict | None) -> dict:
 
 
 def checked_action(action) -> np.ndarray:
-    action = np.asarray(action, dtype=np.float64).reshape(-1)
-    if action.shape != (6,) or not np.all(np.isfinite(action)):
-        raise ValueError(f"an action is six finite joint targets (rad), not {action}")
-    return action
+    return six_finite(action, "joint targets (rad)")
