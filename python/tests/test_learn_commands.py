@@ -161,6 +161,9 @@ def test_several_processes_train_through_accelerates_launcher(tmp_path):
     assert command[module + 1] == "lerobot.scripts.lerobot_train"
     # lerobot-train's own arguments follow unchanged, the extra ones last.
     assert "--policy.type=act" in command[module:] and command[-1] == "--policy.foo=1"
+    # A rendezvous port of its own (two trainings never join one group), no forked loader on the CPU.
+    ports = [int(arg.split("=")[1]) for arg in command if arg.startswith("--main_process_port=")]
+    assert len(ports) == 1 and ports[0] > 0 and "--num_workers=0" in command
     assert Path(lerobot_train.train_command(parse("act", "--dataset", str(tmp_path)), tmp_path)[0]).name == "lerobot-train"
 
 

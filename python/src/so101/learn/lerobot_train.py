@@ -243,7 +243,18 @@ def loader_workers(args) -> int:
         return args.loader_workers
     if args.device.startswith("cuda"):
         return max(1, min(8, (os.cpu_count() or 2) // max(1, args.num_processes) - 1))
-    return 1
+    # Several CPU processes share the cores already, and a loader forked from a process whose
+    # gloo group is up can deadlock it (a 3-step run hung for 5 min in the suite).
+    return 0 if args.num_processes > 1 else 1
+
+
+def free_port() -> int:
+    """A TCP port no one listens on now (the system picks it)."""
+    import socket
+
+    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as probe:
+        probe.bind(("127.0.0.1", 0))
+        return probe.getsockname()[1]
 
 
 def launcher(args) -> list[str]:
@@ -260,6 +271,9 @@ def launcher(args) -> list[str]:
         # accelerate gives each process one thread unless told: on the CPU they share the cores.
         f"--num_cpu_threads_per_process={max(1, (os.cpu_count() or 1) // args.num_processes)}",
         "--num_machines=1",
+        # A port of its own for the processes' rendezvous: at accelerate's fixed default, a second
+        # training on the machine would join the first one's group and both would wait forever.
+        f"--main_process_port={free_port()}",
         "--mixed_precision=no",
         "--dynamo_backend=no",
         "-m",
