@@ -115,34 +115,27 @@ pub fn evaluate(kind: TaskKind, dense_shaping: bool, observation: &TaskObservati
                 success,
             }
         }
-        TaskKind::CubeToBin => {
-            let success = observation.cube_in_bin();
-            let reward = match (success, dense_shaping) {
-                (true, _) => 1.0,
-                (false, false) => 0.0,
-                (false, true) => staged_shaping(observation, observation.bin_goal),
-            };
-            TaskOutcome { reward, success }
-        }
-        TaskKind::PlaceCube => {
-            let success = observation.placed();
-            let reward = match (success, dense_shaping) {
-                (true, _) => 1.0,
-                (false, false) => 0.0,
-                (false, true) => staged_shaping(observation, observation.place_pad.center),
-            };
-            TaskOutcome { reward, success }
-        }
-        TaskKind::LiftCube => {
-            let success = observation.lifted();
-            let reward = match (success, dense_shaping) {
-                (true, _) => 1.0,
-                (false, false) => 0.0,
-                (false, true) => approach_grasp_lift(observation),
-            };
-            TaskOutcome { reward, success }
-        }
+        TaskKind::CubeToBin => goal_outcome(observation.cube_in_bin(), dense_shaping, || {
+            staged_shaping(observation, observation.bin_goal)
+        }),
+        TaskKind::PlaceCube => goal_outcome(observation.placed(), dense_shaping, || {
+            staged_shaping(observation, observation.place_pad.center)
+        }),
+        TaskKind::LiftCube => goal_outcome(observation.lifted(), dense_shaping, || {
+            approach_grasp_lift(observation)
+        }),
     }
+}
+
+/// A goal task's outcome: 1 once the goal holds; before it, 0, or with `dense_shaping` the
+/// task's shaping (below 1).
+fn goal_outcome(success: bool, dense_shaping: bool, shaping: impl FnOnce() -> f64) -> TaskOutcome {
+    let reward = match (success, dense_shaping) {
+        (true, _) => 1.0,
+        (false, false) => 0.0,
+        (false, true) => shaping(),
+    };
+    TaskOutcome { reward, success }
 }
 
 /// The first three stages of the staged shaping, each worth up to 0.2: approach the cube, grasp
