@@ -13,6 +13,7 @@ import os
 import re
 import subprocess
 import sys
+import threading
 from pathlib import Path
 
 import numpy as np
@@ -179,6 +180,21 @@ def test_a_tiny_act_trained_on_a_converted_dataset_runs_through_the_runner(
 
     # Unchanged against the physical arm's driver (on the servo-bus emulator) and its cameras
     # (so101_camera_node serving two fake cameras, their JPEG frames): the arm follows the policy.
+    # The sim goes first, so the driver alone answers on /joint_states and /joint_commands; the
+    # cube's pose the policy takes comes from a stand-in for a cube tracker, at the sim's last pose.
+    from geometry_msgs.msg import PoseStamped
+
+    cube = ros.subscribe("/cube/pose", PoseStamped, best_effort_qos()).next_message(20.0, sim)
+    assert sim.stop() == 0, sim.log_tail()
+    tracker = ros.publisher("/cube/pose", PoseStamped, reliable_qos(10), wait_for_subscriber=None)
+    tracking = threading.Event()
+
+    def track() -> None:
+        while not tracking.wait(1 / 30):
+            cube.header.stamp = ros.node.get_clock().now().to_msg()
+            tracker.publish(cube)
+
+    threading.Thread(target=track, daemon=True).start()
     arm, _emulator = arm_factory()
     cameras = SimNode(
         node_binary("so101_camera_node"),
@@ -198,6 +214,7 @@ def test_a_tiny_act_trained_on_a_converted_dataset_runs_through_the_runner(
         ],
         timeout=120,
     )
+    tracking.set()
     assert done.returncode == 0, done.stdout[-3000:] + done.stderr[-3000:]
     arm.assert_alive()
     cameras.assert_alive()

@@ -17,6 +17,7 @@ static ROSOUT: OnceLock<NodeLoggingHandle> = OnceLock::new();
 
 /// Installs the subscriber; `RUST_LOG` overrides the default filter. Safe to call more than once.
 pub fn init() {
+    super::crash::install();
     let filter =
         EnvFilter::try_from_default_env().unwrap_or_else(|_| EnvFilter::new(DEFAULT_FILTER));
     let _ = tracing_subscriber::registry()

@@ -4,6 +4,7 @@ pub mod arm_controller;
 pub mod clock;
 pub mod command_inbox;
 pub mod context;
+pub mod crash;
 pub mod logging;
 pub mod names;
 pub mod node;
