@@ -15,6 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
+from .. import contract
 from ..ee import EeCommander, checked_action_space, ee_from_lerobot_ee, ee_poses, lerobot_ee_from_ee
 from ..units import lerobot_from_radians, radians_from_lerobot
 
@@ -23,6 +24,8 @@ ENVIRONMENT_STATE = "observation.environment_state"  # the cube's pose (so101.da
 ENVIRONMENT_STATE_SIZE = 7
 EE_STATE = "observation.ee_state"  # the end-effector state (so101.ee; the converter's --action-space ee)
 IMAGE_PREFIX = "observation.images."
+# Policies that pad (or drop) an image input no camera feeds: the VLAs, pretrained on 2-3 cameras.
+PADDED_IMAGES = ("smolvla", "pi0", "pi05")
 log = logging.getLogger(__name__)
 
 
@@ -85,11 +88,12 @@ class StackPolicy:
         if action is None or tuple(action.shape) != (6,):
             raise PolicyError(f"the policy's action is {action}, not six joint targets")
         visual = [key for key, feature in inputs.items() if feature.type is FeatureType.VISUAL]
-        if unnamed := [key for key in visual if not key.startswith(IMAGE_PREFIX)]:
-            raise PolicyError(f"the policy's images {unnamed} are not observation.images.<camera>")
-        self.cameras = [
-            CameraInput(key.removeprefix(IMAGE_PREFIX), int(inputs[key].shape[1]), int(inputs[key].shape[2])) for key in visual
-        ]
+        self.cameras = camera_inputs(
+            {key: tuple(inputs[key].shape) for key in visual},
+            renamed_inputs(self.preprocessor),
+            training_features(source),
+            optional_images=config.type in PADDED_IMAGES,
+        )
         self.needs_environment_state = ENVIRONMENT_STATE in inputs
         if self.needs_environment_state and tuple(inputs[ENVIRONMENT_STATE].shape) != (ENVIRONMENT_STATE_SIZE,):
             raise PolicyError(f"the policy's {ENVIRONMENT_STATE} is {inputs[ENVIRONMENT_STATE]}, not the cube's pose (7 values)")
@@ -185,18 +189,74 @@ class StackPolicy:
         return steps.targets[0]
 
 
+def training_features(source: str) -> dict | None:
+    """The features of the dataset the policy was trained on, where the checkpoint's
+    train_config.json leads to it on this machine (None otherwise: a Hub id, a moved dataset)."""
+    import json
+
+    try:
+        dataset = json.loads((Path(source) / "train_config.json").read_text())["dataset"]
+        features = json.loads((Path(dataset["root"]) / "meta" / "info.json").read_text())["features"]
+    except (OSError, KeyError, TypeError, ValueError):
+        return None
+    return features if isinstance(features, dict) else None
+
+
+def renamed_inputs(preprocessor) -> dict[str, str]:
+    """Policy input -> the observation key it is fed from: the inverse of the rename map the
+    policy was fine-tuned with (lerobot-train --rename_map, kept in its preprocessor), e.g.
+    observation.images.camera1 <- observation.images.top for a VLA pretrained on other cameras."""
+    from lerobot.processor.rename_processor import RenameObservationsProcessorStep
+
+    renamed = {}
+    for step in getattr(preprocessor, "steps", []):
+        if isinstance(step, RenameObservationsProcessorStep):
+            renamed.update({policy_key: given for given, policy_key in step.rename_map.items()})
+    return renamed
+
+
+def camera_inputs(
+    visual: dict[str, tuple[int, ...]], renamed: dict[str, str], trained_on: dict | None, optional_images: bool
+) -> list[CameraInput]:
+    """The stack's cameras that feed the policy's images (`visual`: policy key -> (C, H, W)), each
+    at the size the policy was trained on: its training dataset's frames where known (a fine-tuned
+    VLA keeps its pretrained input shapes, and resizes and pads whatever it gets), else the
+    policy's own shape. An image fed by no camera the policy was trained with is left out where
+    the policy pads or drops missing images (optional_images: SmolVLA, pi0), else an error."""
+    cameras, unfed = [], []
+    for key, shape in visual.items():
+        given = renamed.get(key, key)
+        name = given.removeprefix(IMAGE_PREFIX)
+        if trained_on is not None:
+            fed = given in trained_on
+        else:  # a VLA's pretrained inputs are fed where renamed or named as the stack's cameras
+            fed = not optional_images or key in renamed or name in contract.CAMERA_NAMES
+        if not fed or not given.startswith(IMAGE_PREFIX):
+            unfed.append(key)
+            continue
+        if trained_on is not None:
+            height, width = (int(v) for v in trained_on[given]["shape"][:2])  # LeRobot datasets: (H, W, C)
+        else:
+            height, width = int(shape[1]), int(shape[2])
+        cameras.append(CameraInput(name, height, width))
+    if unfed and not optional_images:
+        raise PolicyError(f"the policy's images {unfed} are no camera of the stack (observation.images.<camera>)")
+    if unfed:
+        log.info("no camera feeds the policy's %s: the policy pads them", ", ".join(unfed))
+    if optional_images and not cameras and visual:
+        raise PolicyError(f"no camera of the stack feeds any of the policy's images {list(visual)}")
+    return cameras
+
+
 def detected_action_space(source: str, reads_ee_state: bool) -> str:
     """What the policy's actions are: the names of its training dataset's actions where the
     checkpoint's train_config.json leads to the dataset on this machine (`ee.*`: end-effector
     targets), else end-effector when it reads observation.ee_state (the converter's --action-space
     ee writes both), else joint targets."""
-    import json
-
+    features = training_features(source)
     try:
-        dataset = json.loads((Path(source) / "train_config.json").read_text())["dataset"]
-        info = json.loads((Path(dataset["root"]) / "meta" / "info.json").read_text())
-        names = info["features"]["action"]["names"]
-    except (OSError, KeyError, TypeError, ValueError):
+        names = features["action"]["names"]
+    except (KeyError, TypeError):
         return "ee" if reads_ee_state else "joint"
     if all(str(name).startswith("ee.") for name in names):
         return "ee"

@@ -246,6 +246,8 @@ def evaluate(args, policy: StackPolicy) -> int:
         servo_params=args.servo_params,
         randomize=args.randomize,
         camera_poses=args.camera_poses,
+        task=args.sim_task,
+        task_text=policy.task,
     )
     write_report(Path(args.output), summary, results)
     return 0

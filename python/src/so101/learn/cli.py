@@ -6,6 +6,9 @@
              or on joints + cameras (a dataset of demos --cameras ... --no-environment-state),
              then evaluate it through so101-run-policy in lockstep
   diffusion  the same with LeRobot's Diffusion Policy
+  smolvla    fine-tune SmolVLA (lerobot/smolvla_base or local weights) on a camera dataset's tasks,
+             language-conditioned on each episode's task text, then evaluate it on each task
+  pi0        the same with pi0 (lerobot/pi0_base)
   bc         behaviour cloning with `imitation` on in-process expert rollouts;
              --continue-with-sac STEPS: then SAC on cube_to_bin continuing from the clone
   sac        SAC (Stable-Baselines3) on the dense reward, success rate over training
@@ -21,7 +24,7 @@ import sys
 
 from .. import subcommands
 from ..subcommands import Subcommand
-from . import demos, eval_recipe, lerobot_train, sb3_bc, sb3_sac
+from . import demos, eval_recipe, lerobot_train, sb3_bc, sb3_sac, vla
 
 RECIPES = {
     "demos": Subcommand(
@@ -38,6 +41,10 @@ RECIPES = {
             lerobot_train.__doc__,
         )
         for name in ("act", "diffusion")
+    },
+    **{
+        name: Subcommand(vla.summary(name), functools.partial(vla.add_arguments, name=name), vla.run, vla.__doc__)
+        for name in vla.VLAS
     },
     "bc": Subcommand(
         "behaviour cloning (imitation) on in-process expert demonstrations", sb3_bc.add_arguments, sb3_bc.run, sb3_bc.__doc__

@@ -281,15 +281,26 @@ def launcher(args) -> list[str]:
     ]
 
 
-def dataset_task(dataset: Path) -> str:
-    """The contract's task whose text the dataset's episodes carry (the one the recipe evaluates
-    on); cube_to_bin for a dataset of several tasks or of a text no task has."""
+def dataset_texts(dataset: Path) -> list[str]:
+    """The task texts of the dataset's episodes (meta/tasks.parquet; none when unreadable)."""
     import pandas as pd
 
     try:
-        texts = list(pd.read_parquet(Path(dataset) / "meta" / "tasks.parquet").index)
+        return list(pd.read_parquet(Path(dataset) / "meta" / "tasks.parquet").index)
     except (OSError, ValueError):
-        texts = []
+        return []
+
+
+def dataset_tasks(dataset: Path) -> list[str]:
+    """The contract's tasks whose texts the dataset's episodes carry."""
+    texts = dataset_texts(dataset)
+    return [name for name, facts in contract.TASKS.items() if facts.description in texts]
+
+
+def dataset_task(dataset: Path) -> str:
+    """The contract's task whose text the dataset's episodes carry (the one the recipe evaluates
+    on); cube_to_bin for a dataset of several tasks or of a text no task has."""
+    texts = dataset_texts(dataset)
     tasks = [name for name, facts in contract.TASKS.items() if [facts.description] == texts]
     if not tasks:
         print(f"so101-learn: the dataset's tasks {texts} are no single task of the sim: evaluating on cube_to_bin")
