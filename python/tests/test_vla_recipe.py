@@ -49,15 +49,38 @@ def arguments(name: str, *argv: str) -> argparse.Namespace:
     return args
 
 
-def test_pi0_fine_tunes_from_its_base_with_the_camera_map(tmp_path):
-    args = arguments("pi0")
+def test_smolvla_starts_from_the_pretrained_policy_with_the_camera_map(tmp_path):
+    args = arguments("smolvla")
     command = vla.train_command(args, tmp_path / "out", {TOP: PRETRAINED[0]})
     assert command[0].endswith("lerobot-train")
-    assert "--policy.path=lerobot/pi0_base" in command and "--policy.device=cuda" in command
-    assert "--steps=30000" in command and "--batch_size=32" in command
+    assert "--policy.path=lerobot/smolvla_base" in command and "--policy.device=cuda" in command
+    assert "--steps=20000" in command and "--batch_size=64" in command
     (rename,) = [item for item in command if item.startswith("--rename_map=")]
     assert json.loads(rename.removeprefix("--rename_map=")) == {TOP: PRETRAINED[0]}
     assert f"--dataset.root={Path('/data/two_tasks').resolve()}" in command
+
+
+def test_pi0_starts_as_lerobot_documents_it(tmp_path):
+    command = vla.train_command(arguments("pi0"), tmp_path / "out", {})
+    assert "--policy.type=pi0" in command and "--policy.pretrained_path=lerobot/pi0_base" in command
+    assert not [item for item in command if item.startswith(("--policy.path=", "--rename_map="))]
+    assert {"--policy.dtype=bfloat16", "--policy.gradient_checkpointing=true", "--steps=3000", "--batch_size=32"} <= set(command)
+
+
+def test_the_checkpoints_keep_the_dataset_s_features(tmp_path):
+    from so101.evaluate.policy import DATASET_FEATURES_FILE, training_features
+
+    dataset = tmp_path / "dataset"
+    (dataset / "meta").mkdir(parents=True)
+    features = {TOP: {"dtype": "video", "shape": [72, 96, 3]}}
+    (dataset / "meta" / "info.json").write_text(json.dumps({"features": features}))
+    checkpoints = [tmp_path / "out" / "checkpoints" / step / "pretrained_model" for step in ("000003", "last")]
+    for checkpoint in checkpoints:
+        checkpoint.mkdir(parents=True)
+    vla.keep_dataset_features(dataset, tmp_path / "out")
+    for checkpoint in checkpoints:
+        assert (checkpoint / DATASET_FEATURES_FILE).is_file()
+        assert training_features(str(checkpoint)) == features  # no train_config.json needed
 
 
 def test_several_gpus_launch_through_accelerate(tmp_path):
@@ -75,12 +98,16 @@ def test_frames_at_the_training_dataset_s_size_under_the_stack_s_names():
     assert cameras == [CameraInput("top", 72, 96), CameraInput("wrist", 48, 64)]  # camera3: padded by the model
 
 
-def test_a_policy_that_cannot_pad_needs_every_image():
-    visual = {TOP: (3, 48, 64), "observation.images.camera3": (3, 48, 64)}
-    with pytest.raises(PolicyError, match="camera3"):
-        camera_inputs(visual, {}, {TOP: {"shape": [48, 64, 3]}}, optional_images=False)
-    # Without its dataset at hand, a policy's own camera names and shapes stand.
-    assert camera_inputs({TOP: (3, 48, 64)}, {}, None, optional_images=False) == [CameraInput("top", 48, 64)]
+def test_act_takes_its_own_inputs_whatever_its_dataset_became():
+    # lerobot-train filled the config from the dataset: names and sizes stand even when the
+    # dataset at that path was recorded again with other cameras or sizes.
+    visual = {TOP: (3, 48, 64), "observation.images.laptop": (3, 72, 96)}
+    regenerated = {WRIST: {"shape": [96, 128, 3]}}
+    expected = [CameraInput("top", 48, 64), CameraInput("laptop", 72, 96)]
+    assert camera_inputs(visual, {}, regenerated, optional_images=False) == expected
+    assert camera_inputs(visual, {}, None, optional_images=False) == expected
+    with pytest.raises(PolicyError, match="not observation.images"):
+        camera_inputs({"observation.image": (3, 48, 64)}, {}, None, optional_images=False)
 
 
 def test_a_vla_fed_by_no_camera_is_refused():

@@ -74,6 +74,8 @@ def fine_tuned(tmp_path_factory):
     assert "cameras: observation.images.top -> observation.images.camera1, " in done.stdout, done.stdout[-2000:]
     checkpoint = train / "checkpoints" / "last" / "pretrained_model"
     assert (checkpoint / "model.safetensors").is_file()
+    # The frames' sizes travel with the checkpoint (the pretrained inputs say 256x256).
+    assert (checkpoint / "dataset_features.json").is_file()
     return checkpoint, dataset, home
 
 
@@ -109,9 +111,9 @@ def test_the_runner_gives_the_policy_each_task_s_text_and_the_dataset_s_frames(f
     assert not np.allclose(actions[0], actions[1]), "the task's text does not reach the policy"
 
 
-def test_so101_run_policy_evaluates_it_on_each_task(fine_tuned):
+def test_so101_run_policy_evaluates_it_on_a_task(fine_tuned):
     checkpoint, _, home = fine_tuned
-    for task in TASKS:
+    for task in TASKS[:1]:  # the other task's text: test_the_runner_gives_the_policy_each_task_s_text...
         output = home / f"eval_{task}"
         done = run(
             [BIN / "so101-run-policy", checkpoint, "--eval", "1", "--seed", "5", "--episode-time", "1", "--lite",

@@ -24,8 +24,9 @@ ENVIRONMENT_STATE = "observation.environment_state"  # the cube's pose (so101.da
 ENVIRONMENT_STATE_SIZE = 7
 EE_STATE = "observation.ee_state"  # the end-effector state (so101.ee; the converter's --action-space ee)
 IMAGE_PREFIX = "observation.images."
-# Policies that pad (or drop) an image input no camera feeds: the VLAs, pretrained on 2-3 cameras.
-PADDED_IMAGES = ("smolvla", "pi0", "pi05")
+# Policies that take any subset of their image inputs (SmolVLA leaves one no camera feeds out, pi0
+# pads it), at any size (they resize and pad each frame): the VLAs, pretrained on other cameras.
+VLA_TYPES = ("smolvla", "pi0", "pi05")
 log = logging.getLogger(__name__)
 
 
@@ -92,7 +93,7 @@ class StackPolicy:
             {key: tuple(inputs[key].shape) for key in visual},
             renamed_inputs(self.preprocessor),
             training_features(source),
-            optional_images=config.type in PADDED_IMAGES,
+            optional_images=config.type in VLA_TYPES,
         )
         self.needs_environment_state = ENVIRONMENT_STATE in inputs
         if self.needs_environment_state and tuple(inputs[ENVIRONMENT_STATE].shape) != (ENVIRONMENT_STATE_SIZE,):
@@ -189,16 +190,26 @@ class StackPolicy:
         return steps.targets[0]
 
 
+# Written beside a VLA fine-tune's weights by so101-learn smolvla|pi0: its dataset's features, so
+# the checkpoint knows its frame sizes wherever it goes (its train_config.json names a dataset
+# that may not be on the machine that runs it).
+DATASET_FEATURES_FILE = "dataset_features.json"
+
+
 def training_features(source: str) -> dict | None:
-    """The features of the dataset the policy was trained on, where the checkpoint's
-    train_config.json leads to it on this machine (None otherwise: a Hub id, a moved dataset)."""
+    """The features of the dataset the policy was trained on: the checkpoint's own copy
+    (DATASET_FEATURES_FILE), else the dataset its train_config.json leads to on this machine; None
+    otherwise (a Hub id, a moved dataset)."""
     import json
 
     try:
-        dataset = json.loads((Path(source) / "train_config.json").read_text())["dataset"]
-        features = json.loads((Path(dataset["root"]) / "meta" / "info.json").read_text())["features"]
-    except (OSError, KeyError, TypeError, ValueError):
-        return None
+        features = json.loads((Path(source) / DATASET_FEATURES_FILE).read_text())
+    except (OSError, ValueError):
+        try:
+            dataset = json.loads((Path(source) / "train_config.json").read_text())["dataset"]
+            features = json.loads((Path(dataset["root"]) / "meta" / "info.json").read_text())["features"]
+        except (OSError, KeyError, TypeError, ValueError):
+            return None
     return features if isinstance(features, dict) else None
 
 
@@ -218,19 +229,26 @@ def renamed_inputs(preprocessor) -> dict[str, str]:
 def camera_inputs(
     visual: dict[str, tuple[int, ...]], renamed: dict[str, str], trained_on: dict | None, optional_images: bool
 ) -> list[CameraInput]:
-    """The stack's cameras that feed the policy's images (`visual`: policy key -> (C, H, W)), each
-    at the size the policy was trained on: its training dataset's frames where known (a fine-tuned
-    VLA keeps its pretrained input shapes, and resizes and pads whatever it gets), else the
-    policy's own shape. An image fed by no camera the policy was trained with is left out where
-    the policy pads or drops missing images (optional_images: SmolVLA, pi0), else an error."""
+    """The stack's cameras that feed the policy's images (`visual`: policy key -> (C, H, W)).
+
+    A policy that needs every image (ACT, Diffusion: optional_images False) gets each camera under
+    its input's name at its input's size, as its config says (lerobot-train filled both from the
+    dataset). A VLA (optional_images) keeps its pretrained inputs (smolvla_base: camera1..3 at
+    256x256) and resizes and pads whatever it gets: each input is fed by the camera the fine-tune
+    renamed onto it, at the size of the fine-tuning dataset's frames where known (else the
+    input's), and an input no camera feeds is left to the model (SmolVLA leaves it out, pi0 pads it)."""
+    if not optional_images:
+        if unnamed := [key for key in visual if not key.startswith(IMAGE_PREFIX)]:
+            raise PolicyError(f"the policy's images {unnamed} are not observation.images.<camera>")
+        return [CameraInput(key.removeprefix(IMAGE_PREFIX), int(shape[1]), int(shape[2])) for key, shape in visual.items()]
     cameras, unfed = [], []
     for key, shape in visual.items():
         given = renamed.get(key, key)
         name = given.removeprefix(IMAGE_PREFIX)
         if trained_on is not None:
             fed = given in trained_on
-        else:  # a VLA's pretrained inputs are fed where renamed or named as the stack's cameras
-            fed = not optional_images or key in renamed or name in contract.CAMERA_NAMES
+        else:  # fed where renamed or named as one of the stack's cameras
+            fed = key in renamed or name in contract.CAMERA_NAMES
         if not fed or not given.startswith(IMAGE_PREFIX):
             unfed.append(key)
             continue
@@ -238,13 +256,12 @@ def camera_inputs(
             height, width = (int(v) for v in trained_on[given]["shape"][:2])  # LeRobot datasets: (H, W, C)
         else:
             height, width = int(shape[1]), int(shape[2])
+            log.warning("%s: no record of the fine-tuning frames' size, frames go in at the input's %dx%d", key, width, height)
         cameras.append(CameraInput(name, height, width))
-    if unfed and not optional_images:
-        raise PolicyError(f"the policy's images {unfed} are no camera of the stack (observation.images.<camera>)")
-    if unfed:
-        log.info("no camera feeds the policy's %s: the policy pads them", ", ".join(unfed))
-    if optional_images and not cameras and visual:
+    if not cameras and visual:
         raise PolicyError(f"no camera of the stack feeds any of the policy's images {list(visual)}")
+    if unfed:
+        log.info("no camera feeds the policy's %s: left to the model", ", ".join(unfed))
     return cameras
 
 

@@ -7,8 +7,11 @@ The weights are the user's to name (--pretrained): a Hub id (lerobot/smolvla_bas
 downloaded by lerobot-train, which needs the Hub) or a local checkpoint directory (offline). The
 pretrained model keeps its own image inputs (smolvla_base: observation.images.camera1..3); the
 dataset's cameras are mapped onto them in order (--camera-map to choose), a pretrained input no
-camera feeds is padded by the model, and the map travels in the checkpoint, where so101-run-policy
-reads it. Frames go in at the dataset's size: the model resizes and pads them itself.
+camera feeds is left out by the model, and the map travels in the checkpoint, where so101-run-policy
+reads it. pi0 starts as LeRobot's documentation has it: a pi0 on the dataset's own cameras with the
+pretrained weights, in bfloat16 with gradient checkpointing. Frames go in at the dataset's size
+(each checkpoint keeps the dataset's features, dataset_features.json): the model resizes and pads
+them itself.
 
 Sizes: both fine-tune on a GPU (LeRobot's reference: SmolVLA 20,000 steps at batch 64 in about 4 h
 on an A100). On a CPU only a smoke run is practical (a few steps); docs/learning.md has the numbers.
@@ -26,14 +29,38 @@ import time
 from pathlib import Path
 
 from .. import contract
+from ..evaluate.policy import DATASET_FEATURES_FILE
 from ..paths import repo_root
 from .eval_recipe import run_policy_command
 from .lerobot_train import dataset_cameras, dataset_tasks, launcher, loader_workers
 
-# What each recipe fine-tunes from by default and LeRobot's documented length for it.
+# What each recipe fine-tunes from by default, LeRobot's documented length for it, and how LeRobot's
+# documentation starts it: SmolVLA from the pretrained policy whole (--policy.path: its config and
+# inputs, the dataset's cameras renamed onto them), pi0 as a new pi0 on the dataset's features
+# with the pretrained weights (--policy.type=pi0 --policy.pretrained_path), in bfloat16 with
+# gradient checkpointing, vision encoder and backbone trained too.
 VLAS: dict[str, dict] = {
-    "smolvla": {"pretrained": "lerobot/smolvla_base", "policy": "SmolVLA", "steps": 20000, "batch_size": 64},
-    "pi0": {"pretrained": "lerobot/pi0_base", "policy": "pi0", "steps": 30000, "batch_size": 32},
+    "smolvla": {
+        "pretrained": "lerobot/smolvla_base",
+        "policy": "SmolVLA",
+        "start": "path",
+        "steps": 20000,
+        "batch_size": 64,
+        "settings": {},
+    },
+    "pi0": {
+        "pretrained": "lerobot/pi0_base",
+        "policy": "pi0",
+        "start": "type",
+        "steps": 3000,
+        "batch_size": 32,
+        "settings": {
+            "dtype": "bfloat16",
+            "gradient_checkpointing": "true",
+            "freeze_vision_encoder": "false",
+            "train_expert_only": "false",
+        },
+    },
 }
 
 
@@ -113,14 +140,19 @@ def rename_map(cameras: list[str], inputs: list[str], camera_map: str | None) ->
 def train_command(args, output: Path, renames: dict[str, str]) -> list[str]:
     """lerobot-train from the pretrained weights, every setting spelled out."""
     dataset = Path(args.dataset).resolve()
+    vla = VLAS[args.policy_type]
+    if vla["start"] == "path":
+        start = [f"--policy.path={args.pretrained}", f"--rename_map={json.dumps(renames)}"]
+    else:
+        start = [f"--policy.type={args.policy_type}", f"--policy.pretrained_path={args.pretrained}"]
     command = [
         str(Path(sys.executable).with_name("lerobot-train")),
-        f"--policy.path={args.pretrained}",
+        *start,
         f"--dataset.repo_id=local/{dataset.name}",
         f"--dataset.root={dataset}",
         f"--policy.device={args.device}",
         "--policy.push_to_hub=false",
-        f"--rename_map={json.dumps(renames)}",
+        *(f"--policy.{key}={value}" for key, value in vla["settings"].items()),
         f"--steps={args.steps}",
         f"--batch_size={args.batch_size}",
         f"--save_freq={min(args.save_every, args.steps)}",
@@ -134,6 +166,14 @@ def train_command(args, output: Path, renames: dict[str, str]) -> list[str]:
     if args.num_processes > 1:
         command = launcher(args) + command[1:]
     return command
+
+
+def keep_dataset_features(dataset: Path, output: Path) -> None:
+    """Each checkpoint gets the dataset's features beside its weights (so101-run-policy's frame
+    sizes wherever the checkpoint goes: the pretrained inputs say 256x256)."""
+    features = json.loads((dataset / "meta" / "info.json").read_text())["features"]
+    for checkpoint in (output / "checkpoints").glob("*/pretrained_model"):
+        (checkpoint / DATASET_FEATURES_FILE).write_text(json.dumps(features, indent=1))
 
 
 def run(args) -> int:
@@ -150,7 +190,12 @@ def run(args) -> int:
         import torch
 
         args.device = "cuda" if torch.cuda.is_available() else "cpu"
-    renames = rename_map(cameras, pretrained_images(args.pretrained), args.camera_map)
+    if VLAS[name]["start"] == "path":
+        renames = rename_map(cameras, pretrained_images(args.pretrained), args.camera_map)
+    elif args.camera_map:
+        raise SystemExit(f"so101-learn {name}: --camera-map is for SmolVLA; {name} takes the dataset's cameras as named")
+    else:
+        renames = {}
     output = Path(args.output or repo_root() / "outputs" / f"{name}-{time.strftime('%Y%m%d-%H%M%S')}")
     if output.exists():
         raise SystemExit(f"so101-learn {name}: {output} exists already (lerobot-train starts a new run there)")
@@ -162,6 +207,7 @@ def run(args) -> int:
         raise SystemExit(f"so101-learn {name}: lerobot-train failed")
     train_s = time.monotonic() - started
     checkpoint = output / "checkpoints" / "last" / "pretrained_model"
+    keep_dataset_features(dataset, output)
 
     results = {}
     tasks = dataset_tasks(dataset) or ["cube_to_bin"]
