@@ -75,6 +75,11 @@ def ros_probe():
     rclpy.try_shutdown(context=context)
 
 
+# RECORDING_ALONE: lerobot-record keeps its loop on its own clock and drops the frame of a late
+# period (its warning: "Record loop is running slower (2.9 Hz) than the target FPS"). Beside a
+# training worker in the parallel phase, one iteration of 345 ms at the start of episode 0 lost
+# 4 of 45 frames (CI, 2026-11-27). The tests of this recording (and the policy trained on it,
+# driven by async inference's own clock) run in the `alone` phase.
 @pytest.fixture(scope="module")
 def recording(tmp_path_factory, ros_probe):
     """lerobot-record, 2 episodes from the sim driven by the emulated leader; returns what the
@@ -146,6 +151,7 @@ def recording(tmp_path_factory, ros_probe):
     return {"root": root, "dataset": dataset, "env": env, "followed_s": followed_s, "log": text}
 
 
+@pytest.mark.alone  # see RECORDING_ALONE
 def test_lerobot_record_with_an_emulated_leader_records_the_sim(recording):
     from lerobot.datasets.lerobot_dataset import LeRobotDataset
 
@@ -184,6 +190,7 @@ def test_lerobot_record_with_an_emulated_leader_records_the_sim(recording):
     assert dataset[s1]["task"] == "move the arm"
 
 
+@pytest.mark.alone  # see RECORDING_ALONE
 def test_lerobot_replay_puts_the_sim_where_the_episode_ends(recording, ros_probe, tmp_path):
     # Episode 1 ends with the leader's shoulder moved (checked above): a fresh sim starts elsewhere.
     from lerobot.datasets.lerobot_dataset import LeRobotDataset
@@ -259,6 +266,7 @@ def listening(port: int) -> bool:
         return probe.connect_ex(("127.0.0.1", port)) == 0
 
 
+@pytest.mark.alone  # see RECORDING_ALONE
 def test_async_inference_drives_the_sim_through_so101_ros(recording, tiny_act, ros_probe, tmp_path):
     from sensor_msgs.msg import JointState
 
