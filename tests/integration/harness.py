@@ -557,3 +557,20 @@ def rrd_entities(path) -> dict[str, int]:
     for chunk in RrdReader(str(path)).stream().to_chunks():
         rows[str(chunk.entity_path)] = rows.get(str(chunk.entity_path), 0) + chunk.num_rows
     return rows
+
+
+# =========================================================================== LeRobot's CLIs
+def offline_env(home: Path) -> dict[str, str]:
+    """This environment with the Hugging Face caches under `home` and no Hub, no Weights & Biases."""
+    return {
+        **os.environ,
+        "HF_HUB_OFFLINE": "1",
+        "WANDB_MODE": "disabled",
+        "HF_HOME": str(home / "hf"),
+        "HF_LEROBOT_HOME": str(home / "lerobot"),
+    }
+
+
+def run_offline(argv: list, timeout: float, home: Path) -> subprocess.CompletedProcess:
+    """A LeRobot or so101 command in offline_env(home), its output captured."""
+    return subprocess.run([str(a) for a in argv], capture_output=True, text=True, timeout=timeout, env=offline_env(home))

@@ -7,14 +7,13 @@ tiny ACT trained on the dataset by lerobot-train evaluates on the env during tra
 from __future__ import annotations
 
 import json
-import os
-import subprocess
 import sys
 from pathlib import Path
 
 import numpy as np
 import pytest
 from harness import TINY_ACT, Probe, SimNode, node_binary, stop_nodes, wait_until
+from harness import run_offline as run
 
 from so101.evaluate.episodes import WATCHABLE_HEIGHT
 
@@ -23,17 +22,6 @@ SEED = 3  # the sim's seed while recording: the env reset with it puts the cube 
 CAMERA = ("top", 48, 64)  # name, height, width: the dataset's one camera and the env's
 ENV_FLAGS = ["--env.type=so101_sim", "--env.cameras={top: [48, 64]}", "--env.episode_length=8"]
 REPO_ID = "local/so101_env_test"
-
-
-def run(argv: list, timeout: float, home: Path) -> subprocess.CompletedProcess:
-    env = {
-        **os.environ,
-        "HF_HUB_OFFLINE": "1",
-        "WANDB_MODE": "disabled",
-        "HF_HOME": str(home / "hf"),
-        "HF_LEROBOT_HOME": str(home / "lerobot"),
-    }
-    return subprocess.run([str(a) for a in argv], capture_output=True, text=True, timeout=timeout, env=env)
 
 
 @pytest.fixture(scope="module")

@@ -9,7 +9,6 @@ from __future__ import annotations
 
 import json
 import math
-import os
 import signal
 import socket
 import subprocess
@@ -18,7 +17,8 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from harness import SimNode, best_effort_qos, node_binary, stop_nodes, wait_until
+from harness import SimNode, best_effort_qos, node_binary, offline_env, stop_nodes, wait_until
+from harness import run_offline as run
 from tiny_vla import make_backbone, make_pretrained_smolvla
 
 from so101 import contract
@@ -26,18 +26,6 @@ from so101 import contract
 BIN = Path(sys.executable).parent
 CAMERAS = "top:64x48,wrist:64x48"
 TASKS = ("lift_cube", "cube_to_bin")
-
-
-def run(argv: list, timeout: float, home: Path, **extra: str) -> subprocess.CompletedProcess:
-    env = {
-        **os.environ,
-        "HF_HUB_OFFLINE": "1",
-        "WANDB_MODE": "disabled",
-        "HF_HOME": str(home / "hf"),
-        "HF_LEROBOT_HOME": str(home / "lerobot"),
-        **extra,
-    }
-    return subprocess.run([str(a) for a in argv], capture_output=True, text=True, timeout=timeout, env=env)
 
 
 @pytest.fixture(scope="module")
@@ -161,7 +149,7 @@ def test_async_inference_runs_it_on_the_sim_through_so101_ros(fine_tuned, ros, t
         node_binary(), ["--lite", "--cameras", CAMERAS, "--camera-rate", "30", "--namespace", "vla"], tmp_path / "sim.log"
     )
     commands = ros.subscribe("/vla/joint_commands", JointState, best_effort_qos())
-    env = {**os.environ, "HF_HUB_OFFLINE": "1", "HF_HOME": str(home / "hf"), "PYTHONFAULTHANDLER": "1"}
+    env = {**offline_env(home), "PYTHONFAULTHANDLER": "1"}
     logs = {name: open(tmp_path / f"{name}.log", "w", buffering=1) for name in ("server", "client")}
     port = 18766
     server = client = None

@@ -218,7 +218,14 @@ def train_command(args, output: Path) -> list[str]:
         training.update(vision_training)
     command += [f"--policy.{key}={value}" for key, value in policy.items()]
     command += [f"--{key}={value}" for key, value in training.items()]
-    command += [
+    return with_run_settings(command, args, output)
+
+
+def with_run_settings(command: list[str], args, output: Path) -> list[str]:
+    """A lerobot-train command completed with the run's length, checkpoints, seed, loaders, output
+    and the user's --policy-arg, launched through accelerate for several processes (every recipe
+    that trains with lerobot-train)."""
+    command = command + [
         f"--steps={args.steps}",
         f"--batch_size={args.batch_size}",
         f"--save_freq={min(args.save_every, args.steps)}",
@@ -227,8 +234,8 @@ def train_command(args, output: Path) -> list[str]:
         f"--num_workers={loader_workers(args)}",
         "--wandb.enable=false",
         f"--output_dir={output}",
+        *args.policy_arg,
     ]
-    command += list(args.policy_arg)
     if args.num_processes > 1:
         # The same arguments to lerobot-train's module in each of the launched processes.
         command = launcher(args) + command[1:]

@@ -32,7 +32,7 @@ from .. import contract
 from ..evaluate.policy import DATASET_FEATURES_FILE
 from ..paths import repo_root
 from .eval_recipe import run_policy_command
-from .lerobot_train import dataset_cameras, dataset_tasks, launcher, loader_workers
+from .lerobot_train import dataset_cameras, dataset_tasks, with_run_settings
 
 # What each recipe fine-tunes from by default, LeRobot's documented length for it, and how LeRobot's
 # documentation starts it: SmolVLA from the pretrained policy whole (--policy.path: its config and
@@ -153,19 +153,8 @@ def train_command(args, output: Path, renames: dict[str, str]) -> list[str]:
         f"--policy.device={args.device}",
         "--policy.push_to_hub=false",
         *(f"--policy.{key}={value}" for key, value in vla["settings"].items()),
-        f"--steps={args.steps}",
-        f"--batch_size={args.batch_size}",
-        f"--save_freq={min(args.save_every, args.steps)}",
-        f"--log_freq={max(1, min(100, args.steps // 10))}",
-        f"--seed={args.seed}",
-        f"--num_workers={loader_workers(args)}",
-        "--wandb.enable=false",
-        f"--output_dir={output}",
     ]
-    command += list(args.policy_arg)
-    if args.num_processes > 1:
-        command = launcher(args) + command[1:]
-    return command
+    return with_run_settings(command, args, output)
 
 
 def keep_dataset_features(dataset: Path, output: Path) -> None:
