@@ -88,6 +88,14 @@ def pytest_collection_finish(session: pytest.Session) -> None:
 
 
 # =========================================================================== the node process
+def show_on_failure(request: pytest.FixtureRequest, nodes: list[SimNode]) -> None:
+    """Registers a fixture's list of nodes: their output goes into the report of a failed test."""
+    groups = getattr(request.node, "_so101_node_groups", None)
+    if groups is None:
+        groups = request.node._so101_node_groups = []
+    groups.append(nodes)
+
+
 @pytest.fixture
 def sim_factory(request: pytest.FixtureRequest, tmp_path: Path):
     """start(*args, lite=True) -> SimNode: starts $SO101_BIN_DIR/so101_sim_node with the given flags
@@ -95,7 +103,7 @@ def sim_factory(request: pytest.FixtureRequest, tmp_path: Path):
     exit with return code 0; a node that died during the test fails it too."""
     binary: list[Path] = []
     nodes: list[SimNode] = []
-    request.node._so101_sim_nodes = nodes  # shown by pytest_runtest_makereport on failure
+    show_on_failure(request, nodes)
 
     def start(*args: str, lite: bool = True) -> SimNode:
         if not binary:
@@ -131,7 +139,8 @@ def pytest_runtest_makereport(item: pytest.Item, call: pytest.CallInfo):
     """Attach the output of every node of a failed test to its report."""
     report = yield
     if report.failed:
-        for index, node in enumerate([*getattr(item, "_so101_sim_nodes", []), *getattr(item, "_so101_recorders", [])]):
+        nodes = [node for group in getattr(item, "_so101_node_groups", []) for node in group]
+        for index, node in enumerate(nodes):
             report.sections.append((f"node #{index} output ({report.when}): {node.describe()}", node.log_tail(20000)))
     return report
 
@@ -148,7 +157,7 @@ def arm_factory(request: pytest.FixtureRequest, tmp_path: Path):
 
     nodes: list[SimNode] = []
     emulators: list[ServoEmulator] = []
-    request.node._so101_sim_nodes = nodes
+    show_on_failure(request, nodes)
 
     def start(*args: str, emulator_args=(), calibration=CALIBRATION, emulator_calibration=None, wait=True):
         # The emulated servos come calibrated as the file says (as after `calibrate`), unless the
@@ -183,6 +192,7 @@ def recorder_factory(request: pytest.FixtureRequest, tmp_path: Path):
     """start(*args, output=tmp_path/"bags") -> SimNode: recorder_node recording into `output`. At
     teardown it gets SIGINT and must exit 0 (unless the test set `node.exit_expected = True`)."""
     nodes: list[SimNode] = []
+    show_on_failure(request, nodes)
 
     def start(*args: str, output: Path | None = None) -> SimNode:
         output = output or tmp_path / "bags"
@@ -190,8 +200,6 @@ def recorder_factory(request: pytest.FixtureRequest, tmp_path: Path):
         node = SimNode(node_binary("recorder_node"), argv, tmp_path / f"recorder_node.{len(nodes)}.log")
         node.output = output
         nodes.append(node)
-        # Shown with the other nodes' output when the test fails.
-        request.node._so101_recorders = nodes
         return node
 
     yield start
@@ -208,11 +216,11 @@ def teleop_factory(request: pytest.FixtureRequest, tmp_path: Path):
     SIGINT and must exit 0 (unless the test set `node.exit_expected = True`, or it already ended
     with 0 by itself)."""
     nodes: list[SimNode] = []
+    show_on_failure(request, nodes)
 
     def start(*args: str) -> SimNode:
         node = SimNode(node_binary("teleop_node"), [str(a) for a in args], tmp_path / f"teleop_node.{len(nodes)}.log")
         nodes.append(node)
-        request.node._so101_recorders = [*getattr(request.node, "_so101_recorders", []), node]
         return node
 
     yield start
