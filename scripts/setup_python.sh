@@ -12,6 +12,9 @@
 #   PYTHON   interpreter to build the venv with (default: the first CPython 3.12 found; lerobot
 #            0.6 needs 3.12, and the ros-jazzy-* wheels exist for it)
 #   VENV     where to put the venv (default: <repo>/.venv)
+#   VLA_VENV where to put the VLAs' environment (default: <repo>/.venv-vla): the venv plus
+#            python/requirements-vla.txt (transformers, for SmolVLA and pi0), kept apart because
+#            LeRobot imports transformers whenever it is installed, seconds at every LeRobot start
 #
 # Afterwards: `. scripts/ros_env.sh` (optional, see there), and run anything that opens a DDS
 # participant inside `scripts/isolated`.
@@ -22,7 +25,9 @@ REPO_ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 help_if_asked "${BASH_SOURCE[0]}" "$@"
 REQUIREMENTS="${REPO_ROOT}/python/requirements.txt"
 NODEPS_REQUIREMENTS="${REPO_ROOT}/python/requirements-nodeps.txt"
+VLA_REQUIREMENTS="${REPO_ROOT}/python/requirements-vla.txt"
 VENV="${VENV:-${REPO_ROOT}/.venv}"
+VLA_VENV="${VLA_VENV:-${REPO_ROOT}/.venv-vla}"
 STAMP="${VENV}/.so101-requirements.stamp"
 
 log() { printf 'setup_python: %s\n' "$*" >&2; }
@@ -30,6 +35,7 @@ die() { printf 'setup_python: ERROR: %s\n' "$*" >&2; exit 1; }
 
 [ -f "${REQUIREMENTS}" ] || die "missing ${REQUIREMENTS}"
 [ -f "${NODEPS_REQUIREMENTS}" ] || die "missing ${NODEPS_REQUIREMENTS}"
+[ -f "${VLA_REQUIREMENTS}" ] || die "missing ${VLA_REQUIREMENTS}"
 
 # Pick the interpreter: $PYTHON if given, else the first CPython 3.12 found (on PATH, then pyenv's
 # versions; Debian 12's own python3 is 3.11, which lerobot 0.6 does not support).
@@ -53,14 +59,15 @@ else
 fi
 
 # The .pth hook written below is part of what a venv must have: bump its version when it changes.
-PTH_VERSION=2
+PTH_VERSION=3
 PACKAGE="${REPO_ROOT}/python/pyproject.toml"
 PLUGINS="$(cat "${REPO_ROOT}"/python/plugins/*/pyproject.toml | sha256sum | cut -d" " -f1)"
-WANT="requirements=$(sha256_of "${REQUIREMENTS}") nodeps=$(sha256_of "${NODEPS_REQUIREMENTS}") package=$(sha256_of "${PACKAGE}") plugins=${PLUGINS} python=${PY_VERSION} pth=${PTH_VERSION}"
+WANT="requirements=$(sha256_of "${REQUIREMENTS}") nodeps=$(sha256_of "${NODEPS_REQUIREMENTS}") vla=$(sha256_of "${VLA_REQUIREMENTS}") vla_venv=${VLA_VENV} package=$(sha256_of "${PACKAGE}") plugins=${PLUGINS} python=${PY_VERSION} pth=${PTH_VERSION}"
 
 # Fast path: nothing changed since the last successful run.
-if [ -x "${VENV}/bin/python" ] && [ -f "${STAMP}" ] && [ "$(cat "${STAMP}")" = "${WANT}" ]; then
-    log "${VENV} is up to date (Python ${PY_VERSION})"
+up_to_date() { [ -x "${VENV}/bin/python" ] && [ -x "${VLA_VENV}/bin/python" ] && [ -f "${STAMP}" ] && [ "$(cat "${STAMP}")" = "${WANT}" ]; }
+if up_to_date; then
+    log "${VENV} and ${VLA_VENV} are up to date (Python ${PY_VERSION})"
     exit 0
 fi
 
@@ -70,8 +77,8 @@ if command -v flock >/dev/null 2>&1; then
     exec 9>"${VENV}.lock"
     flock 9
     # Another run may have finished the work while we waited.
-    if [ -x "${VENV}/bin/python" ] && [ -f "${STAMP}" ] && [ "$(cat "${STAMP}")" = "${WANT}" ]; then
-        log "${VENV} is up to date (Python ${PY_VERSION})"
+    if up_to_date; then
+        log "${VENV} and ${VLA_VENV} are up to date (Python ${PY_VERSION})"
         exit 0
     fi
 fi
@@ -102,6 +109,12 @@ log "installing ${NODEPS_REQUIREMENTS#"${REPO_ROOT}"/} (--no-deps)"
 # (Its name before the move to python/ was so101-lerobot: a venv made then loses that one first.)
 if "${VENV}/bin/python" -m pip show --quiet so101-lerobot >/dev/null 2>&1; then
     "${VENV}/bin/python" -m pip uninstall --quiet --yes so101-lerobot
+fi
+# A venv made when the VLAs' packages were part of it loses them (they live in the VLAs' environment).
+if "${VENV}/bin/python" -m pip show --quiet transformers >/dev/null 2>&1; then
+    log "removing the VLAs' packages from ${VENV} (they live in ${VLA_VENV})"
+    # shellcheck disable=SC2046  # one argument per package name
+    "${VENV}/bin/python" -m pip uninstall --quiet --yes $(sed -n 's/^\([A-Za-z0-9_.-]*\)==.*/\1/p' "${VLA_REQUIREMENTS}")
 fi
 # With it, LeRobot's plugins (python/plugins: robot type so101_ros, env type so101_sim), each a
 # distribution of its own because LeRobot finds plugins by distribution name.
@@ -141,6 +154,34 @@ rmw = get_rmw_implementation_identifier()
 assert rmw == "rmw_fastrtps_cpp", rmw
 import os
 assert os.environ["FASTRTPS_DEFAULT_PROFILES_FILE"].endswith("python/fastdds_profile.xml"), os.environ
+EOF
+
+# The VLAs' environment: a venv of the same interpreter that sees everything of the main one (its
+# site-packages added as a site directory, so its .pth hooks and editable installs work there too)
+# and adds python/requirements-vla.txt, plus its own copies of the console scripts (lerobot-*,
+# so101-*) so that they run with its interpreter.
+log "making ${VLA_VENV} (${VENV#"${REPO_ROOT}"/} + ${VLA_REQUIREMENTS#"${REPO_ROOT}"/})"
+rm -rf "${VLA_VENV}"
+"${VENV}/bin/python" -m venv --without-pip "${VLA_VENV}"
+VLA_SITE_PACKAGES="$("${VLA_VENV}/bin/python" -c 'import sysconfig; print(sysconfig.get_paths()["purelib"])')"
+# ros_wheels_bootstrapper (rclpy's wheels) finds the ROS libraries under sys.prefix, which here is
+# the VLAs' environment: it is given the main one's before it re-executes the interpreter with them.
+ROS_LIBRARY_PATH="$(printf '%s:' "${VENV}/lib" "${SITE_PACKAGES}"/ros_*.libs)"
+printf 'import os, site; "_ROS_WHEELS_BOOTSTRAP_COMPLETE" in os.environ or os.environ.update(LD_LIBRARY_PATH="%s" + os.environ.get("LD_LIBRARY_PATH", "")); site.addsitedir("%s")\n' \
+    "${ROS_LIBRARY_PATH}" "${SITE_PACKAGES}" >"${VLA_SITE_PACKAGES}/so101_main_venv.pth"
+# lerobot and accelerate again (--no-deps, the main one's pins) for their console scripts.
+LEROBOT_REQUIREMENT="$(grep -o '^lerobot\[[^]]*\]==[0-9.]*' "${REQUIREMENTS}" | sed 's/\[.*\]//')"
+ACCELERATE_REQUIREMENT="$(grep '^accelerate==' "${REQUIREMENTS}")"
+"${VENV}/bin/python" -m pip --python "${VLA_VENV}/bin/python" install --quiet --disable-pip-version-check \
+    --no-deps --ignore-installed -r "${VLA_REQUIREMENTS}" "${LEROBOT_REQUIREMENT}" "${ACCELERATE_REQUIREMENT}"
+"${VENV}/bin/python" -m pip --python "${VLA_VENV}/bin/python" install --quiet --disable-pip-version-check \
+    --no-deps --no-build-isolation --ignore-installed --editable "${REPO_ROOT}/python"
+"${VLA_VENV}/bin/python" - <<'EOF'
+import sys
+from lerobot.policies.smolvla.modeling_smolvla import SmolVLAPolicy  # noqa: F401
+import rclpy  # noqa: F401
+import so101.learn.vla  # noqa: F401
+assert sys.prefix != sys.base_prefix
 EOF
 
 printf '%s\n' "${WANT}" >"${STAMP}"

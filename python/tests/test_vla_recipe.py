@@ -113,3 +113,27 @@ def test_act_takes_its_own_inputs_whatever_its_dataset_became():
 def test_a_vla_fed_by_no_camera_is_refused():
     with pytest.raises(PolicyError, match="no camera of the stack"):
         camera_inputs({key: (3, 256, 256) for key in PRETRAINED}, {}, None, optional_images=True)
+
+
+@pytest.fixture
+def without_transformers(monkeypatch):
+    """This environment as setup_python.sh makes the main one: no transformers (the VLAs' own is .venv-vla)."""
+    import importlib.util
+
+    find_spec = importlib.util.find_spec
+    monkeypatch.setattr(importlib.util, "find_spec", lambda name, *a: None if name == "transformers" else find_spec(name, *a))
+
+
+def test_without_the_vla_packages_the_recipe_says_where_they_are(without_transformers):
+    with pytest.raises(
+        SystemExit, match=r"so101-learn smolvla: a smolvla policy needs transformers .*\.venv-vla/bin/so101-learn smolvla"
+    ):
+        vla.run(arguments("smolvla"))
+
+
+def test_without_the_vla_packages_the_runner_refuses_a_vla_checkpoint_with_the_reason(without_transformers, tmp_path):
+    from so101.evaluate.policy import StackPolicy
+
+    (tmp_path / "config.json").write_text(json.dumps({"type": "smolvla"}))
+    with pytest.raises(PolicyError, match=r"needs transformers .*\.venv-vla/bin/so101-run-policy"):
+        StackPolicy(str(tmp_path), device="cpu")

@@ -3,12 +3,15 @@ converted into one dataset with both task texts, a tiny SmolVLA shaped as lerobo
 (tiny_vla.py: made here, no Hub) fine-tuned on it with `so101-learn smolvla`, then run by
 so101-run-policy on each task (the task's text to the policy, frames at the dataset's size into
 inputs it was pretrained with under other names), by lerobot-eval on the env type, and by LeRobot's
-async inference on the sim through the robot type so101_ros."""
+async inference on the sim through the robot type so101_ros. Everything that loads the VLA runs in
+the VLAs' environment (.venv-vla: the main one plus transformers); the recording and conversion,
+and this test's own process, in the main one."""
 
 from __future__ import annotations
 
 import json
 import math
+import os
 import signal
 import socket
 import subprocess
@@ -17,13 +20,15 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from harness import SimNode, best_effort_qos, node_binary, offline_env, stop_nodes, wait_until
+from harness import REPO_ROOT, SimNode, best_effort_qos, node_binary, offline_env, stop_nodes, wait_until
 from harness import run_offline as run
-from tiny_vla import make_backbone, make_pretrained_smolvla
 
 from so101 import contract
 
 BIN = Path(sys.executable).parent
+# The VLAs' environment scripts/setup_python.sh makes (VLA_VENV there).
+VLA_BIN = Path(os.environ.get("VLA_VENV", REPO_ROOT / ".venv-vla")) / "bin"
+TINY_VLA = Path(__file__).with_name("tiny_vla.py")
 CAMERAS = "top:64x48,wrist:64x48"
 TASKS = ("lift_cube", "cube_to_bin")
 
@@ -49,10 +54,12 @@ def fine_tuned(tmp_path_factory):
     )  # fmt: skip
     assert done.returncode == 0 and "2 episode(s) (2 successful)" in done.stdout, done.stdout + done.stderr
 
-    pretrained = make_pretrained_smolvla(home / "smolvla_tiny", make_backbone(home / "smolvlm_tiny"))
+    done = run([VLA_BIN / "python", TINY_VLA, "make", home], 300, home)
+    assert done.returncode == 0, (done.stdout + done.stderr)[-4000:]
+    pretrained = done.stdout.strip().splitlines()[-1]
     train = home / "train"
     done = run(
-        [BIN / "so101-learn", "smolvla", "--dataset", dataset, "--pretrained", pretrained, "--steps", "3",
+        [VLA_BIN / "so101-learn", "smolvla", "--dataset", dataset, "--pretrained", pretrained, "--steps", "3",
          "--batch-size", "4", "--device", "cpu", "--eval", "0", "--output", train, "--quiet"],
         600,
         home,
@@ -78,24 +85,16 @@ def test_the_two_tasks_convert_into_one_dataset_with_both_texts(fine_tuned):
 
 
 def test_the_runner_gives_the_policy_each_task_s_text_and_the_dataset_s_frames(fine_tuned):
-    import torch
-
-    from so101.evaluate.policy import StackPolicy
-
-    checkpoint, _, _ = fine_tuned
+    checkpoint, _, home = fine_tuned
     texts = [contract.TASKS[task].description for task in TASKS]
-    policies = [StackPolicy(str(checkpoint), device="cpu", task=text) for text in texts]
+    done = run([VLA_BIN / "python", TINY_VLA, "act", checkpoint, *texts], 300, home)
+    assert done.returncode == 0, (done.stdout + done.stderr)[-4000:]
+    report = json.loads(done.stdout.strip().splitlines()[-1])
     # Frames at the dataset's size (the pretrained 256x256 inputs are the model's to pad into),
     # from the cameras the fine-tune renamed: camera3 has none and is left to the model.
-    assert [(c.name, c.width, c.height) for c in policies[0].cameras] == [("top", 64, 48), ("wrist", 64, 48)]
-    rng = np.random.default_rng(0)
-    images = {name: rng.integers(0, 255, (48, 64, 3), dtype=np.uint8) for name in ("top", "wrist")}
-    actions = []
-    for policy in policies:
-        policy.reset()
-        torch.manual_seed(0)  # the same noise for the flow's sampling: only the text differs
-        actions.append(policy.act(policy.observation(np.zeros(6), images)))
-    assert all(np.all(np.isfinite(a)) for a in actions)
+    assert report["cameras"] == [["top", 64, 48], ["wrist", 64, 48]]
+    actions = [np.array(action) for action in report["actions"]]
+    assert len(actions) == 2 and all(np.all(np.isfinite(a)) for a in actions)
     assert not np.allclose(actions[0], actions[1]), "the task's text does not reach the policy"
 
 
@@ -104,7 +103,7 @@ def test_so101_run_policy_evaluates_it_on_a_task(fine_tuned):
     for task in TASKS[:1]:  # the other task's text: test_the_runner_gives_the_policy_each_task_s_text...
         output = home / f"eval_{task}"
         done = run(
-            [BIN / "so101-run-policy", checkpoint, "--eval", "1", "--seed", "5", "--episode-time", "1", "--lite",
+            [VLA_BIN / "so101-run-policy", checkpoint, "--eval", "1", "--seed", "5", "--episode-time", "1", "--lite",
              "--backend", "inprocess", "--sim-task", task, "--videos", "0", "--output", output, "--quiet"],
             300,
             home,
@@ -120,7 +119,7 @@ def test_lerobot_eval_runs_it_on_the_env_type(fine_tuned):
     checkpoint, _, home = fine_tuned
     output = home / "lerobot_eval"
     done = run(
-        [BIN / "lerobot-eval", f"--policy.path={checkpoint}", "--policy.device=cpu", "--env.type=so101_sim",
+        [VLA_BIN / "lerobot-eval", f"--policy.path={checkpoint}", "--policy.device=cpu", "--env.type=so101_sim",
          "--env.task=lift_cube", "--env.cameras={top: [48, 64], wrist: [48, 64]}", "--env.environment_state=false",
          "--env.episode_length=6",
          # LeRobot's evaluation takes the camera renaming again (its default map is empty).
@@ -155,7 +154,7 @@ def test_async_inference_runs_it_on_the_sim_through_so101_ros(fine_tuned, ros, t
     server = client = None
     try:
         server = subprocess.Popen(
-            [sys.executable, "-m", "lerobot.async_inference.policy_server", "--host=127.0.0.1", f"--port={port}", "--fps=30"],
+            [VLA_BIN / "python", "-m", "lerobot.async_inference.policy_server", "--host=127.0.0.1", f"--port={port}", "--fps=30"],
             env=env,
             stdout=logs["server"],
             stderr=subprocess.STDOUT,
@@ -168,7 +167,7 @@ def test_async_inference_runs_it_on_the_sim_through_so101_ros(fine_tuned, ros, t
             "camera2: {topic: camera/wrist/image_raw, width: 64, height: 48, fps: 30}}"
         )
         client = subprocess.Popen(
-            [sys.executable, "-m", "lerobot.async_inference.robot_client", "--robot.type=so101_ros",
+            [VLA_BIN / "python", "-m", "lerobot.async_inference.robot_client", "--robot.type=so101_ros",
              "--robot.namespace=vla", "--robot.id=sim", f"--robot.cameras={cameras}",
              f"--server_address=127.0.0.1:{port}", "--policy_type=smolvla",
              f"--pretrained_name_or_path={checkpoint}", "--policy_device=cpu", "--actions_per_chunk=10",

@@ -2,10 +2,17 @@
 backbone (its config, image processor and a word-level tokenizer carrying the special image tokens
 SmolVLA reads) and a "pretrained" policy on three 32x32 cameras (camera1..3, as smolvla_base's) and
 six joints, with its processors, saved as LeRobot saves a checkpoint. What the stack does with
-lerobot/smolvla_base from the Hub, it does with this, without the Hub."""
+lerobot/smolvla_base from the Hub, it does with this, without the Hub.
+
+Run by the VLAs' environment's interpreter (.venv-vla: transformers), from the tests of the main one:
+  tiny_vla.py make DIRECTORY        makes the backbone and the policy, prints the policy's path
+  tiny_vla.py act CHECKPOINT TEXT.. the stack's policy on one fixed observation per task text:
+                                    prints its cameras and one action per text (JSON)"""
 
 from __future__ import annotations
 
+import json
+import sys
 from pathlib import Path
 
 from so101 import contract
@@ -113,3 +120,33 @@ def make_pretrained_smolvla(directory: Path, backbone: Path) -> Path:
     preprocessor.save_pretrained(directory)
     postprocessor.save_pretrained(directory)
     return directory
+
+
+def act_per_text(checkpoint: str, texts: list[str]) -> dict:
+    """The stack's policy (so101.evaluate.policy.StackPolicy) on one fixed observation under each
+    task text, with the same noise for the flow's sampling: only the text differs."""
+    import numpy as np
+    import torch
+
+    from so101.evaluate.policy import StackPolicy
+
+    policies = [StackPolicy(checkpoint, device="cpu", task=text) for text in texts]
+    rng = np.random.default_rng(0)
+    images = {name: rng.integers(0, 255, (48, 64, 3), dtype=np.uint8) for name in ("top", "wrist")}
+    actions = []
+    for policy in policies:
+        policy.reset()
+        torch.manual_seed(0)
+        actions.append(np.asarray(policy.act(policy.observation(np.zeros(6), images)), dtype=float).tolist())
+    return {"cameras": [[c.name, c.width, c.height] for c in policies[0].cameras], "actions": actions}
+
+
+if __name__ == "__main__":
+    command, target, *rest = sys.argv[1:]
+    if command == "make":
+        home = Path(target)
+        print(make_pretrained_smolvla(home / "smolvla_tiny", make_backbone(home / "smolvlm_tiny")))
+    elif command == "act":
+        print(json.dumps(act_per_text(target, rest)))
+    else:
+        sys.exit(f"unknown command {command}")

@@ -9,6 +9,7 @@ is on this machine (detected_action_space)."""
 
 from __future__ import annotations
 
+import importlib.util
 import logging
 from dataclasses import dataclass
 from pathlib import Path
@@ -28,6 +29,19 @@ IMAGE_PREFIX = "observation.images."
 # pads it), at any size (they resize and pad each frame): the VLAs, pretrained on other cameras.
 VLA_TYPES = ("smolvla", "pi0", "pi05")
 log = logging.getLogger(__name__)
+
+
+def vla_packages_missing(policy_type: str, command: str) -> str | None:
+    """Why this environment cannot run a `policy_type` policy, or None: the VLAs need LeRobot's
+    smolvla/pi extras (transformers), which the stack keeps in an environment of their own
+    (.venv-vla) because LeRobot imports transformers at every start wherever it is installed."""
+    if policy_type not in VLA_TYPES or importlib.util.find_spec("transformers") is not None:
+        return None
+    return (
+        f"a {policy_type} policy needs transformers (LeRobot's smolvla/pi extras), which this environment "
+        f"lacks: run it in the VLAs' environment (.venv-vla/bin/{command}; scripts/setup_python.sh makes it), "
+        "or add them here (pip install -r python/requirements-vla.txt)"
+    )
 
 
 class PolicyError(Exception):
@@ -69,6 +83,8 @@ class StackPolicy:
             config = PreTrainedConfig.from_pretrained(source)
         except Exception as error:  # noqa: BLE001 - a missing file and a bad Hub id read the same to a user
             raise PolicyError(f"cannot load a LeRobot policy config from {source!r} ({type(error).__name__}: {error})") from error
+        if missing := vla_packages_missing(config.type, "so101-run-policy"):
+            raise PolicyError(missing)
         config.pretrained_path = Path(source) if Path(source).exists() else source
         config.device = self.device
         try:

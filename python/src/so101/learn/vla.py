@@ -29,7 +29,7 @@ import time
 from pathlib import Path
 
 from .. import contract
-from ..evaluate.policy import DATASET_FEATURES_FILE
+from ..evaluate.policy import DATASET_FEATURES_FILE, vla_packages_missing
 from ..paths import repo_root
 from .eval_recipe import run_policy_command
 from .lerobot_train import dataset_cameras, dataset_tasks, with_run_settings
@@ -167,6 +167,8 @@ def keep_dataset_features(dataset: Path, output: Path) -> None:
 
 def run(args) -> int:
     name = args.policy_type
+    if missing := vla_packages_missing(name, f"so101-learn {name}"):
+        raise SystemExit(f"so101-learn {name}: {missing}")
     if args.steps <= 0 or args.batch_size <= 0 or args.num_processes <= 0:
         raise SystemExit(f"so101-learn {name}: --steps, --batch-size and --num-processes must be positive")
     dataset = Path(args.dataset)
