@@ -319,6 +319,15 @@ class Probe:
         self.node.create_subscription(msg_type, topic, inbox._push, qos if qos is not None else reliable_qos())
         return inbox
 
+    def one_message(self, topic: str, msg_type, timeout: float, sim: SimNode | None = None, qos=None) -> Any:
+        """The next message on `topic`, from a subscription that ends with it (no callbacks after)."""
+        inbox = Inbox(topic)
+        subscription = self.node.create_subscription(msg_type, topic, inbox._push, qos if qos is not None else best_effort_qos())
+        try:
+            return inbox.next_message(timeout, sim)
+        finally:
+            self.node.destroy_subscription(subscription)
+
     def publisher(self, topic: str, msg_type, qos=None, wait_for_subscriber: float | None = 10.0, sim: SimNode | None = None):
         pub = self.node.create_publisher(msg_type, topic, qos if qos is not None else reliable_qos())
         if wait_for_subscriber:

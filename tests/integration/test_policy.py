@@ -67,6 +67,10 @@ def test_a_tiny_act_trained_on_a_converted_dataset_runs_through_the_runner(
     ros.wait_for_graph(lambda: ros.node.count_subscribers("/episode/events") >= 1, 20.0, "the recorder", sim)
     teleop = teleop_factory("--source", "expert", "--sim-time", "--episodes", "1", "--seed", "5")
     wait_until(lambda: not teleop.alive(), 90.0, "the expert's episode", sim)
+    # Where the expert left the cube, for the stand-in cube tracker the arm needs below.
+    from geometry_msgs.msg import PoseStamped
+
+    cube = ros.one_message("/cube/pose", PoseStamped, 20.0, sim)
     wait_until(lambda: (recorder.output / "episode_000000" / "metadata.yaml").is_file(), 20.0, "the closed episode", sim)
     dataset = tmp_path / "dataset"
     done = run(
@@ -181,10 +185,7 @@ def test_a_tiny_act_trained_on_a_converted_dataset_runs_through_the_runner(
     # Unchanged against the physical arm's driver (on the servo-bus emulator) and its cameras
     # (so101_camera_node serving two fake cameras, their JPEG frames): the arm follows the policy.
     # The sim goes first, so the driver alone answers on /joint_states and /joint_commands; the
-    # cube's pose the policy takes comes from a stand-in for a cube tracker, at the sim's last pose.
-    from geometry_msgs.msg import PoseStamped
-
-    cube = ros.subscribe("/cube/pose", PoseStamped, best_effort_qos()).next_message(20.0, sim)
+    # cube's pose the policy takes comes from a stand-in for a cube tracker, where the expert left it.
     assert sim.stop() == 0, sim.log_tail()
     tracker = ros.publisher("/cube/pose", PoseStamped, reliable_qos(10), wait_for_subscriber=None)
     tracking = threading.Event()
