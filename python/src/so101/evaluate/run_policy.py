@@ -430,6 +430,11 @@ def main(argv: list[str] | None = None) -> int:
     args.reward = args.reward or reward_mode(args.sim_task, dense_reward=True)
     if args.reward not in modes:
         raise SystemExit(f"so101-run-policy: {args.sim_task} has no {args.reward} reward (it offers: {', '.join(modes)})")
+    if args.eval > 0 and args.workers > 1:
+        from . import parallel
+
+        # The workers' imports (LeRobot, torch: seconds of CPU) beside this process's own.
+        parallel.start_fork_server([evaluate_share.__module__, "lerobot.policies.factory"])
     try:
         policy = load_policy(args)
         return evaluate(args, policy) if args.eval > 0 else run_live(args, policy)

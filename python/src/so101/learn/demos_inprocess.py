@@ -237,7 +237,11 @@ def record(options: Options, episodes: int, workers: int, output: Path) -> list[
     work.mkdir(parents=True)
     try:
         jobs = [(options, first, count, str(work / f"share-{k:03d}"), len(shares)) for k, (first, count) in enumerate(shares)]
-        results = record_share(*jobs[0]) if len(jobs) == 1 else run_shares(record_share, jobs, len(jobs))
+        results = (
+            record_share(*jobs[0])
+            if len(jobs) == 1
+            else run_shares(record_share, jobs, len(jobs), preload=("lerobot.datasets.lerobot_dataset",))
+        )
         roots = [Path(job[3]) for job in jobs if (Path(job[3]) / "meta" / "info.json").exists()]
         if roots:
             joined = work / "joined"
