@@ -28,7 +28,7 @@ import numpy as np
 import pytest
 from driver_harness import ServoEmulator
 from harness import REPO_ROOT, TINY_ACT, Probe, SimNode, best_effort_qos, node_binary, stop_nodes, wait_until
-from tool_terminal import abort_for_stacks
+from tool_terminal import stop_with_ctrl_c
 
 from so101 import contract
 
@@ -336,16 +336,8 @@ def test_async_inference_drives_the_sim_through_so101_ros(recording, tiny_act, r
         msg = commands.latest()
         assert list(msg.name) == list(contract.JOINT_NAMES) and all(math.isfinite(p) for p in msg.position)
     finally:
-        for proc in (client, server):
-            if proc is not None and proc.poll() is None:
-                proc.send_signal(signal.SIGINT)
-                try:
-                    proc.wait(timeout=15)
-                except subprocess.TimeoutExpired:
-                    abort_for_stacks(proc, logs["client" if proc is client else "server"].write, 5.0)
-                    if proc.poll() is None:
-                        proc.kill()
-                        proc.wait()
+        stop_with_ctrl_c(client, logs["client"].write)
+        stop_with_ctrl_c(server, logs["server"].write)
         for handle in logs.values():
             handle.close()
         problems = stop_nodes([sim])

@@ -12,7 +12,6 @@ from __future__ import annotations
 import json
 import math
 import os
-import signal
 import socket
 import subprocess
 import sys
@@ -22,6 +21,7 @@ import numpy as np
 import pytest
 from harness import REPO_ROOT, SimNode, best_effort_qos, node_binary, offline_env, stop_nodes, wait_until
 from harness import run_offline as run
+from tool_terminal import stop_with_ctrl_c
 
 from so101 import contract
 
@@ -186,14 +186,8 @@ def test_async_inference_runs_it_on_the_sim_through_so101_ros(fine_tuned, ros, t
         msg = commands.latest()
         assert list(msg.name) == list(contract.JOINT_NAMES) and all(math.isfinite(p) for p in msg.position)
     finally:
-        for proc in (client, server):
-            if proc is not None and proc.poll() is None:
-                proc.send_signal(signal.SIGINT)
-                try:
-                    proc.wait(timeout=15)
-                except subprocess.TimeoutExpired:
-                    proc.kill()
-                    proc.wait()
+        stop_with_ctrl_c(client, logs["client"].write)
+        stop_with_ctrl_c(server, logs["server"].write)
         for handle in logs.values():
             handle.close()
         problems = stop_nodes([sim])

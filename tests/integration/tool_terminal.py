@@ -96,6 +96,21 @@ class Terminal:
             self.proc.wait()
 
 
+def stop_with_ctrl_c(proc: subprocess.Popen | None, record, timeout: float = 15.0) -> None:
+    """Ends a Python program still running as Ctrl-C does (SIGINT); one that does not end within
+    `timeout` has its stacks `record`ed (abort_for_stacks) and is killed."""
+    if proc is None or proc.poll() is not None:
+        return
+    proc.send_signal(signal.SIGINT)
+    try:
+        proc.wait(timeout=timeout)
+    except subprocess.TimeoutExpired:
+        abort_for_stacks(proc, record, 5.0)
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+
+
 def abort_for_stacks(proc: subprocess.Popen, record, timeout: float) -> None:
     """For a process that hangs: `record`s its signal state, then sends SIGABRT, on which a Python
     program run with PYTHONFAULTHANDLER=1 writes every thread's stack to its output, so the failure
