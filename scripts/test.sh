@@ -18,7 +18,9 @@ help_if_asked "${BASH_SOURCE[0]}" "$@"
 REPO_ROOT="${SO101_ROOT}"
 cd "${REPO_ROOT}"
 
-log() { printf '\033[1mtest:\033[0m %s\n' "$*" >&2; }
+# Each step with the time since the start (min:s), so a log shows where the suite's time goes.
+started=${SECONDS}
+log() { printf '\033[1mtest:\033[0m [%d:%02d] %s\n' $(((SECONDS - started) / 60)) $(((SECONDS - started) % 60)) "$*" >&2; }
 
 scripts/setup.sh
 
@@ -44,7 +46,8 @@ log "Python unit tests (python/tests: no DDS, no network namespace needed; ${wor
 
 log "rclpy integration tests (in a private network namespace; ${workers} workers, a DDS domain each)"
 export SO101_BIN_DIR="${CARGO_TARGET_DIR}/release"
-scripts/isolated .venv/bin/python -m pytest -q "${parallel[@]}" -m "not alone" tests/integration "$@"
+scripts/isolated .venv/bin/python -m pytest -q "${parallel[@]}" -m "not alone" --durations=15 tests/integration "$@"
 log "rclpy integration tests that time their peer's answers on their own clock (alone, after the rest)"
 # Exit status 5: arguments that select none of them.
 scripts/isolated .venv/bin/python -m pytest -q -m alone tests/integration "$@" || [ $? -eq 5 ]
+log "done"
