@@ -38,22 +38,22 @@ def threads_per_worker(workers: int) -> int:
     return max(1, (os.cpu_count() or 1) // workers)
 
 
-def start_fork_server(modules: Sequence[str]) -> None:
-    """Starts the workers' fork server now, importing `modules` there while this process goes on
-    (else run_shares starts it, and its imports follow this process's own)."""
+def start_fork_server(job: Callable, preload: Sequence[str] = ()) -> None:
+    """Starts the workers' fork server if it is not running, importing `job`'s module and
+    `preload` there; called early, those imports run beside this process's own."""
     from multiprocessing import forkserver
 
-    multiprocessing.get_context("forkserver").set_forkserver_preload(list(modules))
+    # Takes effect where the server is not running yet (a running one keeps its imports).
+    multiprocessing.get_context("forkserver").set_forkserver_preload([job.__module__, *preload])
     forkserver.ensure_running()
 
 
 def run_shares(job: Callable, jobs: list[tuple], workers: int, preload: Sequence[str] = ()) -> list:
     """`job(*arguments)` for each of `jobs` on `workers` processes (a picklable top-level
-    function); every job's results, in the jobs' order. The modules in `preload` (and the job's
-    own) are imported once, before the workers start, unless start_fork_server came first."""
+    function); every job's results, in the jobs' order. The workers fork from the server
+    start_fork_server started (here, with `preload`, unless it came first)."""
+    start_fork_server(job, preload)
     context = multiprocessing.get_context("forkserver")
-    # Takes effect where the server is not running yet (a running one keeps its imports).
-    context.set_forkserver_preload([job.__module__, *preload])
     with ProcessPoolExecutor(max_workers=workers, mp_context=context) as pool:
         futures = [pool.submit(job, *arguments) for arguments in jobs]
         return [result for future in futures for result in future.result()]

@@ -434,7 +434,7 @@ def main(argv: list[str] | None = None) -> int:
         from . import parallel
 
         # The workers' imports (LeRobot, torch: seconds of CPU) beside this process's own.
-        parallel.start_fork_server([evaluate_share.__module__, "lerobot.policies.factory"])
+        parallel.start_fork_server(evaluate_share, preload=("lerobot.policies.factory",))
     try:
         policy = load_policy(args)
         return evaluate(args, policy) if args.eval > 0 else run_live(args, policy)
