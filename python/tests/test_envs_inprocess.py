@@ -196,3 +196,83 @@ def test_the_expert_places_the_cube_on_the_pad():
         assert abs(observation["environment_state"][1] - 0.18) < 0.025
         assert observation["environment_state"][2] < 0.77
     env.close()
+
+
+def test_the_expert_pushes_the_cube_onto_the_target():
+    """push_cube: the jaws nearly closed push the cube along the table, never lift it, and it
+    ends resting inside the round target (3 cm radius at x 0.26, y 0.13 m)."""
+    env = gym.make("so101/PushCube-v0", dense_reward=True)
+    for seed in (2, 7):
+        observation, _ = env.reset(seed=seed)
+        rest = observation["environment_state"][2]
+        expert = ExpertPolicy(waypoint_noise=0.003, action_noise=0.005, seed=seed, task="push_cube")
+        expert.reset(observation)
+        rewards, highest = [], rest
+        for _ in range(600):
+            observation, reward, terminated, truncated, info = env.step(expert(observation))
+            rewards.append(reward)
+            highest = max(highest, observation["environment_state"][2])
+            if terminated:
+                break
+        assert terminated and info["is_success"] and reward == 1.0, seed
+        x, y, z = observation["environment_state"][:3]
+        assert np.hypot(x - 0.26, y - 0.13) < 0.03 and abs(z - rest) < 0.003
+        assert highest < rest + 0.01  # slid, not carried
+        assert rewards[-2] > rewards[0]  # the dense reward grew as the cube neared the target
+    env.close()
+
+
+def test_the_expert_stacks_the_red_cube_on_the_green_one():
+    """stack_cube: the second cube stands left of the arm (only in this task's scene); the red
+    one ends resting on top of it, one edge higher than it lay."""
+    env = gym.make("so101/StackCube-v0")
+    for seed in (2, 7):
+        observation, _ = env.reset(seed=seed)
+        rest = observation["environment_state"][2]
+        expert = ExpertPolicy(waypoint_noise=0.003, action_noise=0.005, seed=seed, task="stack_cube")
+        expert.reset(observation)
+        for _ in range(600):
+            observation, reward, terminated, truncated, info = env.step(expert(observation))
+            if terminated:
+                break
+        assert terminated and info["is_success"] and reward == 1.0, seed
+        x, y, z = observation["environment_state"][:3]
+        assert np.hypot(x - 0.20, y - 0.18) < 0.03 and abs(z - (rest + 0.03)) < 0.003
+    env.close()
+    # The place_cube scene has no second cube: the same plan sets the red cube down on the pad's
+    # bare table, one edge lower than a stack.
+    env = gym.make("so101/PlaceCube-v0")
+    observation, _ = env.reset(seed=2)
+    rest = observation["environment_state"][2]
+    expert = ExpertPolicy(seed=2, task="stack_cube")
+    expert.reset(observation)
+    for _ in range(600):
+        observation, *_ = env.step(expert(observation))
+    assert abs(observation["environment_state"][2] - rest) < 0.003
+    env.close()
+
+
+def test_the_cameras_show_the_push_target_flat_on_the_table_and_the_green_cube_only_in_their_tasks():
+    """push_cube's target is a mark the cameras draw (a 1 mm disc, nothing collides with it);
+    stack_cube's green cube is in its scene only. Seen from the front, the disc is wider than
+    tall (flat on the table), and the other tasks' pictures show neither."""
+    from so101.envs import So101InProcessEnv
+
+    def front(task):
+        env = So101InProcessEnv(task=task, cameras={"front": (240, 320)})
+        observation, _ = env.reset(seed=3)
+        env.close()
+        return observation["pixels"]["front"].astype(int)
+
+    plain = front("cube_to_bin")
+    assert np.array_equal(front("lift_cube"), plain)
+    for task, colour in (("push_cube", (235, 235, 225)), ("stack_cube", (38, 158, 64))):
+        changed = np.abs(front(task) - plain).sum(axis=2) > 30
+        rows, columns = np.nonzero(changed)
+        assert rows.size > 20, task
+        height, width = np.ptp(rows) + 1, np.ptp(columns) + 1
+        assert width < 60 and height < 60, (task, height, width)  # one compact object
+        if task == "push_cube":
+            assert height < 0.8 * width, (height, width)  # a disc seen from above the table (a 6 cm tall one: > 1)
+        mean = front(task)[changed].mean(axis=0)
+        assert np.abs(mean - colour).max() < 60, (task, mean)

@@ -1,8 +1,9 @@
 """The task set through the stack: the main job records tasks other than cube_to_bin
-(`so101-learn demos --task lift_cube|place_cube`: so101-launch with the sim scoring it,
-teleop_node's expert playing it, the recorder's episodes carrying its text), and the in-process
-door records the same task alike; LeRobot reads both datasets back with the task's text and
-successful episodes that end as the task asks (the cube held up, or let go on the pad)."""
+(`so101-learn demos --task lift_cube|place_cube|push_cube|stack_cube`: so101-launch with the sim
+scoring it, teleop_node's expert playing it, the recorder's episodes carrying its text), and the
+in-process door records the same task alike; LeRobot reads both datasets back with the task's text
+and successful episodes that end as the task asks (the cube held up, let go on the pad, pushed onto
+the target, or let go on top of the green cube)."""
 
 from __future__ import annotations
 
@@ -22,7 +23,7 @@ VENV_BIN = Path(sys.executable).parent
 QUIET = ["--waypoint-noise", "0", "--action-noise", "0", "--keep-failures"]
 
 
-@pytest.mark.parametrize("task", ["lift_cube", "place_cube"])
+@pytest.mark.parametrize("task", ["lift_cube", "place_cube", "push_cube", "stack_cube"])
 def test_the_main_job_and_the_in_process_door_record_the_task(task, tmp_path):
     from lerobot.datasets.lerobot_dataset import LeRobotDataset
 
@@ -42,8 +43,8 @@ def test_the_main_job_and_the_in_process_door_record_the_task(task, tmp_path):
         text = contract.TASKS[task].description
         assert list(dataset.meta.tasks.index) == [text]
         succeeded = 0
-        for start, stop in zip(dataset.meta.episodes["dataset_from_index"], dataset.meta.episodes["dataset_to_index"]):
-            first, last = dataset[int(start)], dataset[int(stop) - 1]
+        for start_index, stop in zip(dataset.meta.episodes["dataset_from_index"], dataset.meta.episodes["dataset_to_index"]):
+            first, last = dataset[int(start_index)], dataset[int(stop) - 1]
             assert last["task"] == text
             if not bool(last["next.success"]):
                 continue
@@ -52,9 +53,17 @@ def test_the_main_job_and_the_in_process_door_record_the_task(task, tmp_path):
             if task == "lift_cube":
                 # Held up at the end: the cube well above where it lay, the jaws closed on it.
                 assert cube[2] > start[2] + 0.05 and float(last["observation.state"][5]) < 40.0
-            else:
+            elif task == "place_cube":
                 # Let go on the pad, left of the arm: resting as low as it started, the jaws open.
                 assert abs(cube[1] - 0.18) < 0.025 and abs(cube[2] - start[2]) < 0.003
                 assert float(last["observation.state"][5]) > 40.0
+            elif task == "push_cube":
+                # Slid onto the round target (x 0.26, y 0.13 m, 3 cm radius), never lifted.
+                assert np.hypot(cube[0] - 0.26, cube[1] - 0.13) < 0.03 and abs(cube[2] - start[2]) < 0.003
+                states = dataset.hf_dataset[int(start_index) : int(stop)]["observation.environment_state"]
+                assert max(float(state[2]) for state in states) < start[2] + 0.01
+            else:
+                # On top of the green cube (x 0.20, y 0.18 m): one 3 cm edge above where it lay.
+                assert np.hypot(cube[0] - 0.20, cube[1] - 0.18) < 0.03 and abs(cube[2] - start[2] - 0.03) < 0.003
             assert np.isfinite(last["action"].numpy()).all()
         assert succeeded >= 1, f"no {task} episode of {backend} succeeded"

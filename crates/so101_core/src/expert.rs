@@ -1,6 +1,8 @@
 //! The scripted expert of every task: from the cube's pose, a grasp from above with the jaws
 //! across two faces of the cube, then what the task asks (cube_to_bin: a lift, a move over the bin
-//! and a release; place_cube: the same down onto the pad; lift_cube: a lift, held; the touch tasks: the jaws at the cube, held), as timed
+//! and a release; place_cube: the same down onto the pad; stack_cube: onto the green cube;
+//! lift_cube: a lift, held; the touch tasks: the jaws at the cube, held) or, for push_cube, a push
+//! along the table (`push`), as timed
 //! task-space waypoints that the shared IK turns into joint targets every control period. Noise on the
 //! waypoints and on the joint targets (as in the ALOHA scripted policies) makes the
 //! demonstrations varied. Pure: no I/O.
@@ -25,6 +27,10 @@ pub struct ExpertConfig {
     pub bin: Vector3<f64>,
     /// Where place_cube puts the cube down: the pad's centre.
     pub pad: Vector3<f64>,
+    /// Where stack_cube's green cube stands: its centre.
+    pub stack_base: Vector3<f64>,
+    /// The centre of push_cube's target on the table.
+    pub push_target: Vector3<f64>,
     /// Height of the table top.
     pub table_z: f64,
     /// Gripper targets (rad).
@@ -42,6 +48,13 @@ pub struct ExpertConfig {
 pub const SIM_BIN_IN_WORLD: [f64; 3] = [0.10, -0.22, 0.77];
 /// Where the sim scene's place_cube pad is (world frame, m; its `place_pad` site).
 pub const SIM_PAD_IN_WORLD: [f64; 3] = [0.20, 0.18, 0.765];
+/// Where stack_cube's green cube stands (world frame, m; its centre, the bottom on the table):
+/// where place_cube's pad is.
+pub const SIM_STACK_BASE_IN_WORLD: [f64; 3] = SIM_PAD_IN_WORLD;
+/// The centre of push_cube's round target on the table (world frame, m), left of the cube's area.
+pub const SIM_PUSH_TARGET_IN_WORLD: [f64; 3] = [0.26, 0.13, 0.75];
+/// Radius of push_cube's target: the cube's centre inside it is on target (m).
+pub const PUSH_TARGET_RADIUS: f64 = 0.03;
 /// Height of the sim scene's table top (world frame, m).
 pub const SIM_TABLE_Z: f64 = 0.75;
 /// Seconds an expert episode goes on once the task succeeds (its recording ends on the success).
@@ -66,6 +79,8 @@ impl ExpertConfig {
             task: TaskKind::CubeToBin,
             bin: bin_in_world - base_in_world,
             pad: Vector3::from(SIM_PAD_IN_WORLD) - base_in_world,
+            stack_base: Vector3::from(SIM_STACK_BASE_IN_WORLD) - base_in_world,
+            push_target: Vector3::from(SIM_PUSH_TARGET_IN_WORLD) - base_in_world,
             table_z: SIM_TABLE_Z - base_in_world.z,
             gripper_open: GRIPPER_OPEN,
             gripper_closed: GRIPPER_CLOSED,
@@ -94,6 +109,9 @@ enum Gate {
     /// The gripper has stopped closing; when it closed on nothing (the cube was knocked away), a
     /// regrasp from above.
     Gripped,
+    /// A push has reached its end; when the cube did not get onto the target (it slid or turned
+    /// off the pusher), another push from where it now lies.
+    Pushed,
 }
 
 /// One waypoint: where the grasp point is and how open the gripper is when the segment ends.
@@ -160,6 +178,10 @@ pub struct Plan {
     #[cfg(test)]
     noisy_grasp: Vector3<f64>,
     carry: Carry,
+    /// push_cube: where the pushes take the cube's centre (the target, with the waypoint noise),
+    /// and the target itself.
+    push_goal: Vector3<f64>,
+    push_target: Vector3<f64>,
     table_z: f64,
     task: TaskKind,
     regrasps: u32,
@@ -179,6 +201,8 @@ const GRASP_ABOVE_TABLE: f64 = 0.017;
 const APPROACH_ABOVE_CUBE: f64 = 0.06;
 const CARRY_ABOVE_TABLE: f64 = 0.13;
 const RELEASE_ABOVE_TABLE: f64 = 0.095;
+/// The edge of stack_cube's green cube, m.
+const STACK_BASE_EDGE: f64 = 0.03;
 /// place_cube lets go with the cube this far above the table, m.
 const PLACE_CLEARANCE: f64 = 0.006;
 /// How far place_cube opens the jaws past closed to let go (holding the cube they stop about
@@ -255,16 +279,27 @@ impl Plan {
         };
         let grasp_height = Vector3::new(cube.x, cube.y, config.table_z + GRASP_ABOVE_TABLE);
         let unreachable = PlanError::Unreachable([cube.x, cube.y, cube.z]);
-        let grasp = grasp_pose(grasp_height + noise(rng), yaw).ok_or(unreachable)?;
+        let grasp = grasp_pose(grasp_height + noise(rng), yaw).ok_or(unreachable.clone())?;
         let clean_grasp = grasp_pose(grasp_height, yaw).unwrap_or(grasp);
         let above = |position: Vector3<f64>, height: f64| {
             Vector3::new(position.x, position.y, config.table_z + height)
         };
         let (goal, release_height) = match config.task {
             TaskKind::PlaceCube => (config.pad, GRASP_ABOVE_TABLE + PLACE_CLEARANCE),
+            TaskKind::StackCube => (
+                config.stack_base,
+                GRASP_ABOVE_TABLE + STACK_BASE_EDGE + PLACE_CLEARANCE,
+            ),
             _ => (config.bin, RELEASE_ABOVE_TABLE),
         };
         let goal = goal + noise(rng);
+        // Drawn for push_cube only: every other task's episodes keep the draws they had.
+        let push_target = Vector3::new(config.push_target.x, config.push_target.y, cube.z);
+        let push_goal = if config.task == TaskKind::PushCube {
+            push_target + noise(rng)
+        } else {
+            push_target
+        };
         let carry = Carry {
             lifted: carry_pose(above(grasp.position, CARRY_ABOVE_TABLE)),
             over_goal: carry_pose(above(goal, CARRY_ABOVE_TABLE)),
@@ -290,6 +325,8 @@ impl Plan {
             #[cfg(test)]
             noisy_grasp: grasp.position,
             carry,
+            push_goal,
+            push_target,
             table_z: config.table_z,
             task: config.task,
             regrasps: 0,
@@ -297,8 +334,32 @@ impl Plan {
             gripper_closed: config.gripper_closed,
             slowness: config.slowness,
         };
-        plan.waypoints = plan.pick_and_place(grasp, 1.6);
+        plan.waypoints = if config.task == TaskKind::PushCube {
+            plan.pushes(cube + noise(rng), 1.6).ok_or(unreachable)?
+        } else {
+            plan.pick_and_place(grasp, 1.6)
+        };
         Ok(plan)
+    }
+
+    /// push_cube from wherever the arm is: above the start of a push behind the cube (at
+    /// `cube`), down beside it, the push that takes it to the goal, then back and up. `None` when
+    /// the arm reaches no pose of the push.
+    fn pushes(&self, cube: Vector3<f64>, approach_s: f64) -> Option<Vec<Waypoint>> {
+        let waypoint = |pose: TaskPose, duration: f64, gate: Gate| Waypoint {
+            pose,
+            gripper: push::GRIPPER,
+            duration: duration * self.slowness,
+            gate,
+        };
+        let stroke = push::Stroke::new(cube, self.push_goal, self.table_z)?;
+        Some(vec![
+            waypoint(stroke.above_start, approach_s, Gate::None),
+            waypoint(stroke.start, 1.0, Gate::Reached),
+            waypoint(stroke.end, stroke.seconds, Gate::Pushed),
+            waypoint(stroke.back, 0.4, Gate::None),
+            waypoint(stroke.above_back, 0.5, Gate::None),
+        ])
     }
 
     /// From wherever the arm is: above the grasp, down to it, then the task's part: close, lift,
@@ -320,7 +381,7 @@ impl Plan {
         // On the table the jaws open only as far as letting go takes: a wide swing of the moving
         // jaw knocks the cube off where it was set down.
         let let_go = match self.task {
-            TaskKind::PlaceCube => closed + PLACE_OPENING,
+            TaskKind::PlaceCube | TaskKind::StackCube => closed + PLACE_OPENING,
             _ => open,
         };
         let down = [
@@ -333,7 +394,7 @@ impl Plan {
             waypoint(carry.lifted, closed, 1.0, Gate::None),
         ];
         let rest: Vec<Waypoint> = match self.task {
-            TaskKind::CubeToBin | TaskKind::PlaceCube => grip_and_lift
+            TaskKind::CubeToBin | TaskKind::PlaceCube | TaskKind::StackCube => grip_and_lift
                 .into_iter()
                 .chain([
                     waypoint(carry.over_goal, closed, 1.5, Gate::None),
@@ -346,7 +407,7 @@ impl Plan {
                 .into_iter()
                 .chain([waypoint(carry.lifted, closed, 0.5, Gate::None)])
                 .collect(),
-            TaskKind::TouchCube | TaskKind::TouchCubeSparse => {
+            TaskKind::TouchCube | TaskKind::TouchCubeSparse | TaskKind::PushCube => {
                 vec![waypoint(grasp, open, 0.5, Gate::None)]
             }
         };
@@ -461,9 +522,23 @@ impl Plan {
                 }
                 self.gripper_still_for >= GRIPPER_STILL_PERIODS
             }
+            Gate::Pushed => {
+                // Judged against the target itself (the goal carries the waypoint noise): a
+                // cube already on it is not pushed again, whichever way the noise put the goal.
+                let off_target =
+                    cube.is_some_and(|(at, _)| (at - self.push_target).xy().norm() > push::ON_GOAL);
+                if (reached || self.waited >= GATE_TIMEOUT) && off_target && can_regrasp {
+                    if let Some((at, _)) = cube {
+                        self.push_again(measured, at);
+                        return;
+                    }
+                }
+                reached
+            }
         };
         if open || self.waited >= GATE_TIMEOUT {
-            if waypoint.gate == Gate::Gripped && self.task == TaskKind::PlaceCube {
+            let sets_down = matches!(self.task, TaskKind::PlaceCube | TaskKind::StackCube);
+            if waypoint.gate == Gate::Gripped && sets_down {
                 if let Some((at, _)) = cube {
                     // The cube sits off the grasp point in the jaws: set the cube, not the grasp
                     // point, down on the pad.
@@ -518,7 +593,6 @@ impl Plan {
     /// Starts again from the arm where it is: straight up, over to above the cube's grasp (where
     /// `cube` says it is now, else where it was planned) without the noise, and down to it.
     fn regrasp(&mut self, measured: &JointPositions, cube: Option<(Vector3<f64>, f64)>) {
-        let arm: ArmPositions = std::array::from_fn(|joint| measured[joint]);
         let grasp = cube
             .and_then(|(at, yaw)| {
                 grasp_pose(
@@ -532,6 +606,25 @@ impl Plan {
             grasp.position.y,
             self.table_z + CARRY_ABOVE_TABLE,
         ));
+        // Opening on the way up.
+        let again = self.pick_and_place(grasp, 0.8);
+        self.start_again(measured, self.gripper_open, again);
+    }
+
+    /// Another push from the arm where it is: straight up, then the push of the cube from `cube`
+    /// (where it now lies) to the goal. Counted with the regrasps.
+    fn push_again(&mut self, measured: &JointPositions, cube: Vector3<f64>) {
+        match self.pushes(cube, 0.8) {
+            Some(again) => self.start_again(measured, push::GRIPPER, again),
+            // Out of reach from here: the plan goes on as it was, and tries no more.
+            None => self.regrasps = MAX_REGRASPS,
+        }
+    }
+
+    /// Plays `waypoints` from the arm at `measured`, after going straight up (the gripper moving
+    /// to `gripper`): a sideways move at the cube's height could knock it again. Counts a regrasp.
+    fn start_again(&mut self, measured: &JointPositions, gripper: f64, waypoints: Vec<Waypoint>) {
+        let arm: ArmPositions = std::array::from_fn(|joint| measured[joint]);
         let here = kinematics::task_pose(&arm);
         self.start = Waypoint {
             pose: here,
@@ -539,7 +632,6 @@ impl Plan {
             duration: 0.0,
             gate: Gate::None,
         };
-        // Straight up first, opening: a sideways move at grasp height could knock the cube again.
         let up = TaskPose {
             position: Vector3::new(
                 here.position.x,
@@ -550,11 +642,11 @@ impl Plan {
         };
         self.waypoints = std::iter::once(Waypoint {
             pose: up,
-            gripper: self.gripper_open,
+            gripper,
             duration: 0.5 * self.slowness,
             gate: Gate::None,
         })
-        .chain(self.pick_and_place(grasp, 0.8))
+        .chain(waypoints)
         .collect();
         self.seed = arm;
         self.clock = 0.0;
@@ -615,18 +707,24 @@ fn held_offset_shift(
 /// if it can), with the jaws across the faces of a cube of yaw `yaw`; `None` when no pitch of
 /// [`GRASP_PITCHES`] reaches it.
 fn reachable_pose(position: Vector3<f64>, yaw: f64) -> Option<TaskPose> {
+    reachable_pose_with(position, |heading| grasp_roll(heading, yaw))
+}
+
+/// The grasp point at `position` pointing as steeply down as the arm reaches there, with the roll
+/// `roll` gives for the arm's heading; `None` when no pitch of [`GRASP_PITCHES`] reaches it.
+fn reachable_pose_with(position: Vector3<f64>, roll: impl Fn(f64) -> f64) -> Option<TaskPose> {
     let limits = kinematics::arm_limits();
     let options = IkOptions::default();
     GRASP_PITCHES.iter().find_map(|&pitch| {
         let mut pose = TaskPose {
             position,
             pitch,
-            roll: grasp_roll(kinematics::azimuth(&position), yaw),
+            roll: roll(kinematics::azimuth(&position)),
         };
         let first = kinematics::solve(&pose, &[0.0; ARM_JOINTS], &limits, &options);
         // The arm's plane is off the point's azimuth by the links' sideways offsets: recompute
         // the roll for the heading the arm really takes.
-        pose.roll = grasp_roll(kinematics::heading(&first.joints), yaw);
+        pose.roll = roll(kinematics::heading(&first.joints));
         kinematics::solve(&pose, &first.joints, &limits, &options)
             .reached
             .then_some(pose)
@@ -647,5 +745,6 @@ mod rand_distr_free {
     }
 }
 
+mod push;
 #[cfg(test)]
 mod tests;

@@ -25,6 +25,12 @@ pub enum TaskKind {
     LiftCube,
     /// Sparse: reward 1 once the cube rests on the pad, let go (optional dense shaping).
     PlaceCube,
+    /// Sparse: reward 1 once the cube rests on the marked target, pushed along the table
+    /// (optional dense shaping).
+    PushCube,
+    /// Sparse: reward 1 once the cube rests on top of the second cube, let go (optional dense
+    /// shaping).
+    StackCube,
 }
 
 /// How a task's reward is given.
@@ -68,10 +74,12 @@ pub struct TaskFacts {
 
 impl TaskKind {
     /// Every task, in the order the command lines list them.
-    pub const ALL: [TaskKind; 5] = [
+    pub const ALL: [TaskKind; 7] = [
         Self::CubeToBin,
         Self::LiftCube,
         Self::PlaceCube,
+        Self::PushCube,
+        Self::StackCube,
         Self::TouchCube,
         Self::TouchCubeSparse,
     ];
@@ -83,6 +91,8 @@ impl TaskKind {
             Self::TouchCubeSparse => &TOUCH_CUBE_SPARSE,
             Self::LiftCube => &LIFT_CUBE,
             Self::PlaceCube => &PLACE_CUBE,
+            Self::PushCube => &PUSH_CUBE,
+            Self::StackCube => &STACK_CUBE,
         }
     }
 
@@ -128,6 +138,28 @@ const PLACE_CUBE: TaskFacts = TaskFacts {
     reward_modes: &[RewardMode::Sparse, RewardMode::Dense],
     control_rate_hz: CONTROL_RATE_HZ,
     help: "sparse: reward 1 once the cube rests on the pad left of the arm, let go (dense: staged shaping)",
+};
+
+const PUSH_CUBE: TaskFacts = TaskFacts {
+    name: "push_cube",
+    gym_id: "so101/PushCube-v0",
+    description: "push the cube onto the target",
+    episode_steps: 600,
+    terminates_on_success: true,
+    reward_modes: &[RewardMode::Sparse, RewardMode::Dense],
+    control_rate_hz: CONTROL_RATE_HZ,
+    help: "sparse: reward 1 once the cube rests on the round target left of the cube's area, not held (dense: approach, then the cube's distance to the target)",
+};
+
+const STACK_CUBE: TaskFacts = TaskFacts {
+    name: "stack_cube",
+    gym_id: "so101/StackCube-v0",
+    description: "stack the red cube on the green cube",
+    episode_steps: 600,
+    terminates_on_success: true,
+    reward_modes: &[RewardMode::Sparse, RewardMode::Dense],
+    control_rate_hz: CONTROL_RATE_HZ,
+    help: "sparse: reward 1 once the red cube rests on the green cube left of the arm, let go (dense: staged shaping)",
 };
 
 const TOUCH_CUBE: TaskFacts = TaskFacts {

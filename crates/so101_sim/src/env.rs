@@ -3,12 +3,13 @@
 //! One source for resets, physics, reward and success, whichever door is used.
 
 use so101_core::{
+    expert::{PUSH_TARGET_RADIUS, SIM_PUSH_TARGET_IN_WORLD, SIM_STACK_BASE_IN_WORLD},
     robot::{JointPositions, JOINT_COUNT},
     servo::{ArmServoParams, ServoModelChoice, ServoModelSpec},
 };
 
 use crate::{
-    cameras::rig::{Distractor, ViewExtras},
+    cameras::rig::{Cylinder, ViewExtras},
     mujoco::Simulation,
     placement::{CubePlacer, CubeStart, SpawnArea},
     randomization::{
@@ -23,6 +24,11 @@ use crate::{
 /// The distractor of the held-out shift set: a cylinder the size of a cup (m).
 pub const DISTRACTOR_RADIUS: f64 = 0.03;
 pub const DISTRACTOR_HALF_HEIGHT: f64 = 0.04;
+
+/// push_cube's target as the cameras see it: a white disc on the table, 1 mm thick (a mark, not
+/// a body: nothing collides with it).
+const PUSH_TARGET_MARK_HALF_HEIGHT: f64 = 0.0005;
+const PUSH_TARGET_MARK_RGB: [f32; 3] = [0.92, 0.92, 0.88];
 
 /// Where a reset may put the cube (world frame, m): every point was picked into the bin by a
 /// scripted grasp in this scene, and it stays at least 6.5 cm clear of the bin.
@@ -129,7 +135,11 @@ impl TaskEnv {
         seed: u64,
         options: SimOptions,
     ) -> Result<Self, WorldError> {
-        let world = World::with_servos(sim, 1.0 / control_rate, options.servos)?;
+        let mut world = World::with_servos(sim, 1.0 / control_rate, options.servos)?;
+        if settings.kind == TaskKind::StackCube {
+            let [x, y, _] = SIM_STACK_BASE_IN_WORLD;
+            world.set_stack_base(Some([x, y]));
+        }
         let randomized = options.randomization.map(|config| Randomized {
             randomizer: Randomizer::new(config, seed),
             look: SceneLook::capture(world.simulation()),
@@ -157,23 +167,36 @@ impl TaskEnv {
         self.randomization()?.scene.backgrounds.as_deref()
     }
 
-    /// What the current episode's cameras show beyond the model: the randomization's draw of
-    /// real backgrounds and its distractor on the table.
+    /// What the current episode's cameras show beyond the model: push_cube's target, and the
+    /// randomization's draw of real backgrounds and its distractor on the table.
     pub fn view_extras(&self) -> ViewExtras {
+        let mark = (self.settings.kind == TaskKind::PushCube).then(|| {
+            let [x, y, z] = SIM_PUSH_TARGET_IN_WORLD;
+            Cylinder {
+                centre: [x, y, z + PUSH_TARGET_MARK_HALF_HEIGHT],
+                radius: PUSH_TARGET_RADIUS,
+                half_height: PUSH_TARGET_MARK_HALF_HEIGHT,
+                rgb: PUSH_TARGET_MARK_RGB,
+            }
+        });
         let Some(draw) = self.draw() else {
-            return ViewExtras::default();
+            return ViewExtras {
+                mark,
+                ..ViewExtras::default()
+            };
         };
         ViewExtras {
             background: draw.background,
             distractor: draw.distractor.map(|distractor| {
                 let [x, y] = distractor.position;
-                Distractor {
+                Cylinder {
                     centre: [x, y, scene::TABLE_TOP_Z + DISTRACTOR_HALF_HEIGHT],
                     radius: DISTRACTOR_RADIUS,
                     half_height: DISTRACTOR_HALF_HEIGHT,
                     rgb: distractor.rgb,
                 }
             }),
+            mark,
         }
     }
 

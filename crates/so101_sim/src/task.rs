@@ -37,6 +37,16 @@ impl OrientedBox {
     }
 }
 
+/// stack_cube's green cube at one instant.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct StackBase {
+    pub centre: Vector3<f64>,
+    /// Height of its centre when it stands on the table.
+    pub rest_height: f64,
+    /// Half its edge.
+    pub half_edge: f64,
+}
+
 /// What the tasks need to know about the scene at one instant.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct TaskObservation {
@@ -48,6 +58,11 @@ pub struct TaskObservation {
     pub bin_inside: OrientedBox,
     /// place_cube's pad: where a placed cube's centre rests.
     pub place_pad: OrientedBox,
+    /// push_cube's round target: its centre on the table, and its radius.
+    pub push_target: Vector3<f64>,
+    pub push_target_radius: f64,
+    /// stack_cube's green cube (none in a scene without it).
+    pub stack_base: Option<StackBase>,
     /// The fixed jaw touches the cube.
     pub fixed_jaw_contact: bool,
     /// The moving jaw touches the cube.
@@ -83,10 +98,38 @@ impl TaskObservation {
     /// The cube let go on the pad: its centre over the pad, down at its resting height (not
     /// falling, not tipped onto an edge), no jaw touching it.
     pub fn placed(&self) -> bool {
-        self.place_pad.contains(&self.cube)
-            && (self.cube.z - self.cube_rest_height).abs() < PLACED_HEIGHT_TOLERANCE
+        self.place_pad.contains(&self.cube) && self.resting_let_go(self.cube_rest_height)
+    }
+
+    /// Down at its resting height on the table (not lifted, not tipped onto an edge), no jaw
+    /// touching it.
+    fn resting_let_go(&self, rest_height: f64) -> bool {
+        (self.cube.z - rest_height).abs() < PLACED_HEIGHT_TOLERANCE
             && !self.fixed_jaw_contact
             && !self.moving_jaw_contact
+    }
+
+    /// Horizontal distance from the cube's centre to push_cube's target.
+    fn cube_to_push_target(&self) -> f64 {
+        (self.cube - self.push_target).xy().norm()
+    }
+
+    /// The cube on the table with its centre inside push_cube's target, no jaw touching it.
+    pub fn on_push_target(&self) -> bool {
+        self.cube_to_push_target() < self.push_target_radius
+            && self.resting_let_go(self.cube_rest_height)
+    }
+
+    /// The cube resting on the green cube (which stands on the table), no jaw touching it.
+    pub fn stacked(&self) -> bool {
+        let Some(base) = self.stack_base else {
+            return false;
+        };
+        let base_standing = (base.centre.z - base.rest_height).abs() < PLACED_HEIGHT_TOLERANCE;
+        let over_base = (self.cube - base.centre).xy().norm() < 2.0 * base.half_edge;
+        base_standing
+            && over_base
+            && self.resting_let_go(self.cube_rest_height + 2.0 * base.half_edge)
     }
 
     /// The cube held in both jaws, [`LIFT_HEIGHT`] above its rest: lift_cube's success.
@@ -124,7 +167,23 @@ pub fn evaluate(kind: TaskKind, dense_shaping: bool, observation: &TaskObservati
         TaskKind::LiftCube => goal_outcome(observation.lifted(), dense_shaping, || {
             approach_grasp_lift(observation)
         }),
+        TaskKind::StackCube => goal_outcome(observation.stacked(), dense_shaping, || {
+            observation
+                .stack_base
+                .map_or(0.0, |base| staged_shaping(observation, base.centre))
+        }),
+        TaskKind::PushCube => goal_outcome(observation.on_push_target(), dense_shaping, || {
+            push_shaping(observation)
+        }),
     }
+}
+
+/// push_cube's shaping in [0, 0.8]: the gripper at the cube (up to 0.2), the cube near the
+/// target (up to 0.6).
+fn push_shaping(observation: &TaskObservation) -> f64 {
+    let approach = 1.0 - (10.0 * observation.tip_to_cube()).tanh();
+    let near = 1.0 - (10.0 * observation.cube_to_push_target()).tanh();
+    0.2 * approach + 0.6 * near
 }
 
 /// A goal task's outcome: 1 once the goal holds; before it, 0, or with `dense_shaping` the
@@ -177,6 +236,13 @@ mod tests {
                 rotation: Matrix3::identity(),
                 half_extents: Vector3::new(0.025, 0.025, 0.015),
             },
+            push_target: Vector3::new(0.26, 0.13, 0.0),
+            push_target_radius: 0.03,
+            stack_base: Some(StackBase {
+                centre: Vector3::new(0.2, 0.18, 0.015),
+                rest_height: 0.015,
+                half_edge: 0.015,
+            }),
             fixed_jaw_contact: false,
             moving_jaw_contact: false,
         }
@@ -296,6 +362,69 @@ mod tests {
         assert!(!evaluate(TaskKind::PlaceCube, false, &obs).success);
         obs.cube = Vector3::new(0.2, 0.18, 0.02);
         assert!(!evaluate(TaskKind::PlaceCube, false, &obs).success);
+    }
+
+    #[test]
+    fn push_cube_succeeds_only_resting_on_the_target_let_go() {
+        let mut obs = observation();
+        assert!(!evaluate(TaskKind::PushCube, false, &obs).success);
+        // 2.5 cm from the target's centre, inside its 3 cm radius.
+        obs.cube = Vector3::new(0.26, 0.155, 0.015);
+        assert_eq!(
+            evaluate(TaskKind::PushCube, true, &obs),
+            TaskOutcome {
+                reward: 1.0,
+                success: true
+            }
+        );
+        // Still pushed by a jaw, lifted off the table, or just outside: no.
+        obs.fixed_jaw_contact = true;
+        assert!(!evaluate(TaskKind::PushCube, false, &obs).success);
+        obs.fixed_jaw_contact = false;
+        obs.cube.z += 0.01;
+        assert!(!evaluate(TaskKind::PushCube, false, &obs).success);
+        obs.cube = Vector3::new(0.26, 0.165, 0.015);
+        assert!(!evaluate(TaskKind::PushCube, false, &obs).success);
+        // The shaping grows as the cube nears the target, below success.
+        let near = evaluate(TaskKind::PushCube, true, &obs).reward;
+        obs.cube = Vector3::new(0.23, 0.0, 0.015);
+        let far = evaluate(TaskKind::PushCube, true, &obs).reward;
+        assert!(far < near && near < 0.8, "{far} {near}");
+    }
+
+    #[test]
+    fn stack_cube_succeeds_only_let_go_on_top_of_the_standing_green_cube() {
+        let mut obs = observation();
+        assert!(!evaluate(TaskKind::StackCube, false, &obs).success);
+        // On top: the red cube's centre one edge above the green one's, 1 cm off its axis.
+        obs.cube = Vector3::new(0.21, 0.18, 0.045);
+        assert_eq!(
+            evaluate(TaskKind::StackCube, true, &obs),
+            TaskOutcome {
+                reward: 1.0,
+                success: true
+            }
+        );
+        // Held there, still falling onto it, or on top of a green cube knocked onto its edge: no.
+        obs.moving_jaw_contact = true;
+        assert!(!evaluate(TaskKind::StackCube, false, &obs).success);
+        obs.moving_jaw_contact = false;
+        obs.cube.z = 0.052;
+        assert!(!evaluate(TaskKind::StackCube, false, &obs).success);
+        obs.cube.z = 0.045;
+        let standing = obs.stack_base;
+        obs.stack_base = standing.map(|base| StackBase {
+            centre: base.centre + Vector3::new(0.0, 0.0, 0.006),
+            ..base
+        });
+        assert!(!evaluate(TaskKind::StackCube, false, &obs).success);
+        // Beside it on the table, or in a scene without the green cube: no.
+        obs.stack_base = standing;
+        obs.cube = Vector3::new(0.2, 0.215, 0.015);
+        assert!(!evaluate(TaskKind::StackCube, false, &obs).success);
+        obs.cube = Vector3::new(0.21, 0.18, 0.045);
+        obs.stack_base = None;
+        assert!(!evaluate(TaskKind::StackCube, false, &obs).success);
     }
 
     #[test]

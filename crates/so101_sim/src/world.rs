@@ -3,6 +3,7 @@
 
 use nalgebra::{Matrix3, Vector3};
 use so101_core::{
+    expert::{PUSH_TARGET_RADIUS, SIM_PUSH_TARGET_IN_WORLD},
     robot::{JointLimit, JointPositions, JOINT_COUNT, JOINT_NAMES},
     servo::{ArmServoParams, ServoModelChoice},
 };
@@ -10,8 +11,9 @@ use so101_core::{
 use crate::{
     mujoco::{MujocoError, ObjectKind, Simulation},
     placement::CubeStart,
+    scene::TABLE_TOP_Z,
     servos::ArmServos,
-    task::{OrientedBox, TaskObservation},
+    task::{OrientedBox, StackBase, TaskObservation},
     timing::steps_in_period,
 };
 
@@ -68,7 +70,23 @@ struct SceneIds {
     bin_inside_site: usize,
     /// place_cube's pad; a scene without one offers no place to set the cube down.
     place_pad_site: Option<usize>,
+    /// stack_cube's green cube; a scene without one offers nothing to stack on.
+    stack_base: Option<StackBaseIds>,
 }
+
+/// stack_cube's green cube in the model, and where it stands when parked (the scene's pose).
+#[derive(Debug, Clone, Copy)]
+struct StackBaseIds {
+    body: usize,
+    qpos: usize,
+    dof: usize,
+    geom: usize,
+    half_edge: f64,
+}
+
+/// The views' group of a shown geom, and of one no view draws (so101_sim::mujoco::render).
+const SHOWN_GROUP: i32 = 0;
+const HIDDEN_GROUP: i32 = 5;
 
 pub struct World {
     sim: Simulation,
@@ -91,6 +109,21 @@ pub struct World {
     total_steps: u64,
     /// Where this episode put the cube (`None`: the scene's own pose).
     episode_cube: Option<CubeStart>,
+    /// Where every reset stands stack_cube's green cube on the table (x, y; world frame, m);
+    /// `None`: parked off the table, drawn in no view.
+    stack_base_at: Option<[f64; 2]>,
+}
+
+fn stack_base_ids(sim: &Simulation) -> Option<StackBaseIds> {
+    let joint = sim.id(ObjectKind::Joint, "stack_base_joint")?;
+    let geom = sim.id(ObjectKind::Geom, "stack_base_geom")?;
+    Some(StackBaseIds {
+        body: sim.id(ObjectKind::Body, "stack_base")?,
+        qpos: sim.joint_qpos_address(joint),
+        dof: sim.joint_dof_address(joint),
+        geom,
+        half_edge: sim.geom_size(geom)[2],
+    })
 }
 
 fn require(sim: &Simulation, kind: ObjectKind, name: &str) -> Result<usize, WorldError> {
@@ -148,6 +181,7 @@ impl World {
             bin_goal_site: require(&sim, ObjectKind::Site, "bin_goal")?,
             bin_inside_site: require(&sim, ObjectKind::Site, "bin_inside")?,
             place_pad_site: sim.id(ObjectKind::Site, "place_pad"),
+            stack_base: stack_base_ids(&sim),
         };
         let cube_rest_height = sim.qpos()[ids.cube_qpos + 2];
         let (mass, inertia) = sim.body_mass(ids.cube_body);
@@ -174,6 +208,7 @@ impl World {
             episode_steps: 0,
             total_steps: 0,
             episode_cube: None,
+            stack_base_at: None,
         };
         world.reset(None);
         Ok(world)
@@ -221,6 +256,36 @@ impl World {
         sliding[0] *= friction;
         self.sim.set_geom_friction(self.ids.cube_geom, sliding);
         self.cube_rest_height = nominal.rest_height + (half[2] - nominal.half_extents[2]);
+    }
+
+    /// Stands stack_cube's green cube at (x, y) on the table, now and at every reset, and shows
+    /// it; `None`: from the next reset it stays parked off the table, hidden (every other task).
+    /// Without the cube in the scene, nothing changes.
+    pub fn set_stack_base(&mut self, at: Option<[f64; 2]>) {
+        let Some(ids) = self.ids.stack_base else {
+            return;
+        };
+        self.stack_base_at = at;
+        let group = if at.is_some() {
+            SHOWN_GROUP
+        } else {
+            HIDDEN_GROUP
+        };
+        self.sim.set_geom_group(ids.geom, group);
+        // Standing from now on, not only from the next reset: the sim node's first episode
+        // starts without one.
+        self.stand_stack_base();
+        self.sim.forward();
+    }
+
+    /// Puts stack_cube's green cube, at rest, where [`World::set_stack_base`] stands it.
+    fn stand_stack_base(&mut self) {
+        let (Some(ids), Some([x, y])) = (self.ids.stack_base, self.stack_base_at) else {
+            return;
+        };
+        let standing = [x, y, TABLE_TOP_Z + ids.half_edge, 1.0, 0.0, 0.0, 0.0];
+        self.sim.qpos_mut()[ids.qpos..ids.qpos + 7].copy_from_slice(&standing);
+        self.sim.qvel_mut()[ids.dof..ids.dof + 6].fill(0.0);
     }
 
     /// Joint limits as the scene declares them (commands are clamped to these).
@@ -272,6 +337,7 @@ impl World {
         }
         let cube_dof = self.ids.cube_dof;
         self.sim.qvel_mut()[cube_dof..cube_dof + 6].fill(0.0);
+        self.stand_stack_base();
         self.servos.hold(&self.targets);
         self.write_controls();
         self.sim.forward();
@@ -416,6 +482,13 @@ impl World {
             bin_goal: vector(self.ids.bin_goal_site),
             bin_inside: region(self.ids.bin_inside_site),
             place_pad: self.ids.place_pad_site.map_or(OrientedBox::EMPTY, region),
+            push_target: Vector3::from(SIM_PUSH_TARGET_IN_WORLD),
+            push_target_radius: PUSH_TARGET_RADIUS,
+            stack_base: self.ids.stack_base.map(|ids| StackBase {
+                centre: Vector3::from(self.sim.body_pose(ids.body).0),
+                rest_height: TABLE_TOP_Z + ids.half_edge,
+                half_edge: ids.half_edge,
+            }),
             fixed_jaw_contact,
             moving_jaw_contact,
         }

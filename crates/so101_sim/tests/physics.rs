@@ -246,3 +246,47 @@ fn the_emulators_joint_loads_are_the_scenes_at_home() {
         );
     }
 }
+
+#[test]
+fn only_stack_cube_stands_the_green_cube_on_the_table_from_its_first_episode() {
+    use so101_core::expert::SIM_STACK_BASE_IN_WORLD;
+    use so101_sim::env::{TaskEnv, TaskSettings};
+    let env_of = |kind| {
+        let simulation = scene::load(&PathBuf::from(DEFAULT_SCENE), true).expect("the scene loads");
+        let settings = TaskSettings {
+            kind,
+            dense_reward: false,
+        };
+        TaskEnv::new(simulation, 30.0, settings, 0).expect("the scene binds")
+    };
+    let base_of = |env: &TaskEnv| {
+        env.world()
+            .task_observation()
+            .stack_base
+            .expect("the scene has the green cube")
+            .centre
+    };
+    let mut stack = env_of(TaskKind::StackCube);
+    let [x, y, z] = SIM_STACK_BASE_IN_WORLD;
+    // Before any reset (the sim node's first episode), after a second, and after resets.
+    for _ in 0..2 {
+        let centre = base_of(&stack);
+        assert!(
+            (centre.x - x).abs() < 1e-3 && (centre.y - y).abs() < 1e-3,
+            "{centre:?}"
+        );
+        assert!((centre.z - z).abs() < 1e-3, "{centre:?}");
+        for _ in 0..30 {
+            stack.step(&[0.0; JOINT_COUNT]);
+        }
+        let settled = base_of(&stack);
+        assert!(
+            (settled - centre).norm() < 1e-3,
+            "it stands still: {settled:?}"
+        );
+        stack.reset(None);
+    }
+    // Every other task: parked on the floor, far from the arm.
+    let bin = env_of(TaskKind::CubeToBin);
+    assert!(base_of(&bin).z < 0.1, "{:?}", base_of(&bin));
+}

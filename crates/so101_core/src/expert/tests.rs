@@ -9,6 +9,8 @@ pub fn sim_config() -> ExpertConfig {
         task: TaskKind::CubeToBin,
         bin: Vector3::new(0.10, -0.22, 0.02),
         pad: Vector3::new(0.20, 0.18, 0.015),
+        stack_base: Vector3::new(0.20, 0.18, 0.015),
+        push_target: Vector3::new(0.26, 0.13, 0.0),
         table_z: 0.0,
         gripper_open: 0.9,
         gripper_closed: -0.17,
@@ -156,39 +158,87 @@ fn each_task_ends_where_it_asks_the_lift_held_and_the_touch_open_at_the_cube() {
     }
 }
 
-#[test]
-fn place_cube_sets_the_cube_down_on_the_pad_and_lets_go() {
+/// Plays a set-down task's plan (the arm following exactly, the gripper stopped by the cube) for
+/// a cube away from `goal`: how low the closed jaws came over the goal, and the arm at the end.
+fn set_down_over(task: TaskKind, goal: Vector3<f64>) -> (f64, JointPositions) {
     let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(4);
-    let config = sim_config().for_task(TaskKind::PlaceCube);
-    let mut plan = Plan::new(
-        &[0.0; 6],
-        Vector3::new(0.24, -0.03, 0.015),
-        -0.3,
-        &config,
-        &mut rng,
-    )
-    .unwrap();
+    let config = sim_config().for_task(task);
+    let cube = Vector3::new(0.24, -0.03, 0.015);
+    let mut plan = Plan::new(&[0.0; 6], cube, -0.3, &config, &mut rng).unwrap();
     let mut arm = [0.0; 6];
-    let mut lowest_closed_over_the_pad = f64::INFINITY;
+    let mut lowest_closed_over_the_goal = f64::INFINITY;
     while !plan.finished() {
         arm = plan.step(PERIOD, &arm, None, &config, &mut rng);
         arm[5] = arm[5].max(HOLDING);
         let at: ArmPositions = std::array::from_fn(|j| arm[j]);
         let tip = kinematics::task_pose(&at).position;
-        if (tip.xy() - config.pad.xy()).norm() < 0.005 && arm[5] < 0.5 {
-            lowest_closed_over_the_pad = lowest_closed_over_the_pad.min(tip.z);
+        if (tip.xy() - goal.xy()).norm() < 0.005 && arm[5] < 0.5 {
+            lowest_closed_over_the_goal = lowest_closed_over_the_goal.min(tip.z);
         }
     }
+    (lowest_closed_over_the_goal, arm)
+}
+
+#[test]
+fn place_cube_sets_the_cube_down_on_the_pad_and_lets_go() {
+    let pad = sim_config().pad;
+    let (lowest, arm) = set_down_over(TaskKind::PlaceCube, pad);
     // Carried to the pad still closed, down to just above the table, then opened and away.
     assert!(
-        (lowest_closed_over_the_pad - (GRASP_ABOVE_TABLE + PLACE_CLEARANCE)).abs() < 0.003,
-        "{lowest_closed_over_the_pad}"
+        (lowest - (GRASP_ABOVE_TABLE + PLACE_CLEARANCE)).abs() < 0.003,
+        "{lowest}"
     );
     let end: ArmPositions = std::array::from_fn(|j| arm[j]);
     let tip = kinematics::task_pose(&end).position;
     assert!(
-        (tip.xy() - config.pad.xy()).norm() < 0.01 && tip.z > 0.1 && arm[5] > 0.8,
+        (tip.xy() - pad.xy()).norm() < 0.01 && tip.z > 0.1 && arm[5] > 0.8,
         "{tip:?}"
+    );
+}
+
+#[test]
+fn stack_cube_sets_the_cube_down_on_the_green_cube_and_lets_go() {
+    let (lowest, arm) = set_down_over(TaskKind::StackCube, sim_config().stack_base);
+    // Down to one cube's edge above where place_cube lets go: on top of the green cube.
+    let release = GRASP_ABOVE_TABLE + STACK_BASE_EDGE + PLACE_CLEARANCE;
+    assert!((lowest - release).abs() < 0.003, "{lowest}");
+    assert!(arm[5] > 0.8, "let go: {}", arm[5]);
+}
+
+/// Plays a push_cube plan with an arm that follows its targets exactly and a cube reported at
+/// `cube_at` (from the grasp point's pose); how many pushes it took.
+fn pushes_with(cube_at: impl Fn(Vector3<f64>) -> Vector3<f64>) -> u32 {
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(5);
+    let config = sim_config().for_task(TaskKind::PushCube);
+    let start = Vector3::new(0.22, -0.04, 0.015);
+    let mut plan = Plan::new(&[0.0; 6], start, 0.0, &config, &mut rng).unwrap();
+    let mut arm = [0.0; 6];
+    let mut lowest = f64::INFINITY;
+    for _ in 0..(30.0 / PERIOD) as usize {
+        let at: ArmPositions = std::array::from_fn(|j| arm[j]);
+        let tip = kinematics::task_pose(&at).position;
+        lowest = lowest.min(tip.z);
+        arm = plan.step(PERIOD, &arm, Some((cube_at(tip), 0.0)), &config, &mut rng);
+        // The jaws never open to grasp: pushing only.
+        assert!(arm[5] <= push::GRIPPER + 1e-9, "{}", arm[5]);
+        if plan.finished() {
+            break;
+        }
+    }
+    assert!(plan.finished());
+    assert!((lowest - GRASP_ABOVE_TABLE).abs() < 0.003, "{lowest}");
+    plan.regrasps() + 1
+}
+
+#[test]
+fn push_cube_pushes_again_only_while_the_cube_is_off_the_target() {
+    // A cube that the push takes to the target: one push.
+    let target = sim_config().push_target;
+    assert_eq!(pushes_with(|_| target), 1);
+    // A cube that never moves (it slid off the pusher each time): two more pushes, then the end.
+    assert_eq!(
+        pushes_with(|_| Vector3::new(0.22, -0.04, 0.015)),
+        1 + MAX_REGRASPS
     );
 }
 

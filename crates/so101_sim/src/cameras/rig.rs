@@ -71,12 +71,14 @@ pub struct ViewExtras {
     /// The draw of real backgrounds, for a rig that has them (none: the sim's own scenery).
     pub background: Option<u64>,
     /// An object on the table, in every camera's view.
-    pub distractor: Option<Distractor>,
+    pub distractor: Option<Cylinder>,
+    /// A task's mark on the table (push_cube's target), in every camera's view.
+    pub mark: Option<Cylinder>,
 }
 
 /// An upright cylinder the cameras see (no collision).
 #[derive(Debug, Clone, Copy, PartialEq)]
-pub struct Distractor {
+pub struct Cylinder {
     pub centre: [f64; 3],
     pub radius: f64,
     pub half_height: f64,
@@ -391,12 +393,12 @@ impl CameraRig {
         for &index in &due {
             let view = &mut views.0[index];
             sim.update_scene(view, self.cameras[index].model_id, &self.options);
-            if let Some(distractor) = extras.distractor {
+            for cylinder in [extras.mark, extras.distractor].into_iter().flatten() {
                 view.add_cylinder(
-                    distractor.centre,
-                    distractor.radius,
-                    distractor.half_height,
-                    distractor.rgb,
+                    cylinder.centre,
+                    cylinder.radius,
+                    cylinder.half_height,
+                    cylinder.rgb,
                 );
             }
             match (&self.keying, background) {

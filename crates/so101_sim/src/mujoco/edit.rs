@@ -62,6 +62,16 @@ impl Simulation {
         self.model_slice_mut(self.model().geom_rbound, ngeom)[geom] = radius;
     }
 
+    /// Puts a geom in a visual group: the views draw groups 0-2 (and 3 in the lite variant), not
+    /// 4 and 5.
+    pub fn set_geom_group(&mut self, geom: usize, group: i32) {
+        let ngeom = self.model().ngeom as usize;
+        // SAFETY: MuJoCo allocated ngeom ints here for the life of the model; `&mut self` is
+        // exclusive.
+        let groups = unsafe { std::slice::from_raw_parts_mut(self.model().geom_group, ngeom) };
+        groups[geom] = group;
+    }
+
     /// A geom's sliding, torsional and rolling friction.
     pub fn geom_friction(&self, geom: usize) -> [f64; 3] {
         let all = self.model_slice(self.model().geom_friction, 3 * self.model().ngeom as usize);

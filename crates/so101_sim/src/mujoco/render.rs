@@ -119,7 +119,9 @@ impl SceneBuffer {
             return;
         }
         let rgba = [rgb[0], rgb[1], rgb[2], 1.0];
-        let size = [radius, radius, half_height];
+        // mjv_initGeom reads a cylinder's size as a model geom's (radius, half height) and makes
+        // the scaled (radius, radius, half height) itself.
+        let size = [radius, half_height, 0.0];
         // SAFETY: index ngeom < maxgeom lies within the allocation; mjv_initGeom fills it from
         // three-element size and position arrays (a null matrix: upright).
         unsafe {
