@@ -109,6 +109,10 @@ enum Gate {
     /// The gripper has stopped closing; when it closed on nothing (the cube was knocked away), a
     /// regrasp from above.
     Gripped,
+    /// stack_cube: over the goal, still high, and the cube itself over the goal: else the carry
+    /// moves by how far it is off and the gate waits again (the cube sits in the jaws where the
+    /// grasp pushed it; corrected up there, where it touches nothing, before it goes down).
+    OverGoal,
     /// A push has reached its end; when the cube did not get onto the target (it slid or turned
     /// off the pusher), another push from where it now lies.
     Pushed,
@@ -141,6 +145,10 @@ const STALLED_PROGRESS: f64 = 0.001;
 /// A gripper closed to within this of its closed target holds nothing (holding the cube it
 /// stops about 0.35 rad short), rad.
 const EMPTY_GRIP: f64 = 0.15;
+/// A cube farther than this from where it is set down (horizontally) moves the carry, at most
+/// MAX_CORRECTIONS times, m.
+const SET_DOWN_TOLERANCE: f64 = 0.004;
+const MAX_CORRECTIONS: u32 = 3;
 /// Regrasps an episode tries at most.
 const MAX_REGRASPS: u32 = 2;
 
@@ -151,6 +159,8 @@ struct Carry {
     lifted: TaskPose,
     over_goal: TaskPose,
     release: TaskPose,
+    /// The release moved away from the fixed jaw, which the cube still touches once let go.
+    clear: TaskPose,
     leave: TaskPose,
 }
 
@@ -178,6 +188,13 @@ pub struct Plan {
     #[cfg(test)]
     noisy_grasp: Vector3<f64>,
     carry: Carry,
+    /// Where the cube goes without the waypoint noise (over the bin, the pad, the green cube),
+    /// and how often the carry was moved to put the cube itself there (stack_cube: the carry
+    /// goes to the noisy goal, the set-down to this one, for the stack's millimetres).
+    clean_goal: Vector3<f64>,
+    corrections: u32,
+    /// No more action noise (from stack_cube's OverGoal gate on).
+    quiet: bool,
     /// push_cube: where the pushes take the cube's centre (the target, with the waypoint noise),
     /// and the target itself.
     push_goal: Vector3<f64>,
@@ -250,6 +267,18 @@ fn grasp_pose(at: Vector3<f64>, yaw: f64) -> Option<TaskPose> {
     }))
 }
 
+/// `release` moved horizontally away from the fixed jaw by [`JAW_CLEARANCE`] (the jaw axis points
+/// from it to the moving jaw).
+fn clear_of(release: TaskPose) -> TaskPose {
+    let limits = kinematics::arm_limits();
+    let solution = kinematics::solve(&release, &[0.0; ARM_JOINTS], &limits, &IkOptions::default());
+    let jaw_axis = kinematics::grasp_frame(&solution.joints).rotation * Vector3::x();
+    TaskPose {
+        position: release.position - Vector3::new(jaw_axis.x, jaw_axis.y, 0.0) * JAW_CLEARANCE,
+        ..release
+    }
+}
+
 /// Carrying, only the position matters: the steepest pitch the arm reaches there.
 fn carry_pose(position: Vector3<f64>) -> TaskPose {
     reachable_pose(position, 0.0).unwrap_or(TaskPose {
@@ -292,6 +321,7 @@ impl Plan {
             ),
             _ => (config.bin, RELEASE_ABOVE_TABLE),
         };
+        let clean_goal = goal;
         let goal = goal + noise(rng);
         // Drawn for push_cube only: every other task's episodes keep the draws they had.
         let push_target = Vector3::new(config.push_target.x, config.push_target.y, cube.z);
@@ -300,10 +330,12 @@ impl Plan {
         } else {
             push_target
         };
+        let release = carry_pose(above(goal, release_height));
         let carry = Carry {
             lifted: carry_pose(above(grasp.position, CARRY_ABOVE_TABLE)),
             over_goal: carry_pose(above(goal, CARRY_ABOVE_TABLE)),
-            release: carry_pose(above(goal, release_height)),
+            release,
+            clear: clear_of(release),
             leave: carry_pose(above(goal, CARRY_ABOVE_TABLE + 0.03)),
         };
         let mut plan = Self {
@@ -325,6 +357,9 @@ impl Plan {
             #[cfg(test)]
             noisy_grasp: grasp.position,
             carry,
+            clean_goal,
+            corrections: 0,
+            quiet: false,
             push_goal,
             push_target,
             table_z: config.table_z,
@@ -394,15 +429,24 @@ impl Plan {
             waypoint(carry.lifted, closed, 1.0, Gate::None),
         ];
         let rest: Vec<Waypoint> = match self.task {
-            TaskKind::CubeToBin | TaskKind::PlaceCube | TaskKind::StackCube => grip_and_lift
-                .into_iter()
-                .chain([
-                    waypoint(carry.over_goal, closed, 1.5, Gate::None),
-                    waypoint(carry.release, closed, 0.5, Gate::Reached),
-                    waypoint(carry.release, let_go, 0.5, Gate::None),
-                    waypoint(carry.leave, open, 0.7, Gate::None),
-                ])
-                .collect(),
+            TaskKind::CubeToBin | TaskKind::PlaceCube | TaskKind::StackCube => {
+                // stack_cube sets the cube down within millimetres: over the goal it first puts
+                // the cube itself there; let go, the cube still touches the fixed jaw, so the jaws
+                // move away from it before going up (straight up drags it off the green cube).
+                let stack = self.task == TaskKind::StackCube;
+                let over_goal = if stack { Gate::OverGoal } else { Gate::None };
+                let clear = stack.then(|| waypoint(carry.clear, let_go, 0.3, Gate::None));
+                grip_and_lift
+                    .into_iter()
+                    .chain([
+                        waypoint(carry.over_goal, closed, 1.5, over_goal),
+                        waypoint(carry.release, closed, 0.5, Gate::Reached),
+                        waypoint(carry.release, let_go, 0.5, Gate::None),
+                    ])
+                    .chain(clear)
+                    .chain([waypoint(carry.leave, open, 0.7, Gate::None)])
+                    .collect()
+            }
             TaskKind::LiftCube => grip_and_lift
                 .into_iter()
                 .chain([waypoint(carry.lifted, closed, 0.5, Gate::None)])
@@ -507,6 +551,24 @@ impl Plan {
         let open = match waypoint.gate {
             Gate::None => true,
             Gate::Reached => reached,
+            Gate::OverGoal => {
+                // A stack is set down within a few millimetres: from here on, no noise on the
+                // joint targets (0.01 rad each swings the cube by a centimetre).
+                self.quiet = true;
+                let off = cube
+                    .filter(|_| reached)
+                    .map(|(at, _)| {
+                        Vector3::new(at.x - self.clean_goal.x, at.y - self.clean_goal.y, 0.0)
+                    })
+                    .filter(|off| off.norm() > SET_DOWN_TOLERANCE);
+                if let Some(off) = off.filter(|_| self.corrections < MAX_CORRECTIONS) {
+                    self.shift_goal(-off);
+                    self.corrections += 1;
+                    self.waited = 0.0;
+                    return;
+                }
+                reached
+            }
             Gate::Grasp => {
                 if self.stalled(distance) && !reached && can_regrasp {
                     self.regrasp(measured, cube);
@@ -560,11 +622,13 @@ impl Plan {
         let moved = |pose: TaskPose| carry_pose(pose.position + offset);
         self.carry.over_goal = moved(old.over_goal);
         self.carry.release = moved(old.release);
+        self.carry.clear = clear_of(self.carry.release);
         self.carry.leave = moved(old.leave);
         for waypoint in &mut self.waypoints[self.next_gate..] {
             for (before, after) in [
                 (old.over_goal, self.carry.over_goal),
                 (old.release, self.carry.release),
+                (old.clear, self.carry.clear),
                 (old.leave, self.carry.leave),
             ] {
                 if waypoint.pose == before {
@@ -666,13 +730,14 @@ impl Plan {
             &IkOptions::default(),
         );
         self.seed = solution.joints;
+        let noise = if self.quiet { 0.0 } else { config.action_noise };
         std::array::from_fn(|joint| {
             let value = if joint < ARM_JOINTS {
                 solution.joints[joint]
             } else {
                 gripper
             };
-            JOINT_LIMITS[joint].clamp(value + normal(rng) * config.action_noise)
+            JOINT_LIMITS[joint].clamp(value + normal(rng) * noise)
         })
     }
 }

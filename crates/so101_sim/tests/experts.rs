@@ -1,7 +1,8 @@
 //! The one planner (so101_core::expert, teleop_node's and the in-process expert's) plays the
 //! tasks on the simulated arm, with the demos recipe's noise, as the in-process expert does: a
 //! plan from the settled cube, then each control period the targets for the arm as measured and
-//! the cube where it now lies, each moved at most 0.1 rad. The task's own success judges it.
+//! the cube where it now lies, each moved at most 0.1 rad. The task's own success judges it once the
+//! plan has ended, as teleop_node's expert does.
 
 use std::path::PathBuf;
 
@@ -56,7 +57,9 @@ fn failed_seeds(task: TaskKind, first_seed: u64, episodes: u64) -> Vec<u64> {
         let mut succeeded = false;
         for _ in 0..task.facts().episode_steps {
             let observation = env.observe();
-            if observation.outcome.success {
+            // Judged as teleop_node does: once the plan has ended (a cube set down and then
+            // knocked off as the arm leaves has failed).
+            if judged_until.is_some() && observation.outcome.success {
                 succeeded = true;
                 break;
             }

@@ -422,3 +422,34 @@ fn a_stall_of_the_callers_clock_is_neither_followed_nor_counted_as_waiting() {
         "the stall was taken for a blocked grasp"
     );
 }
+
+#[test]
+fn stack_cube_moves_the_carry_until_the_held_cube_itself_is_over_the_green_cube() {
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(4);
+    let config = sim_config().for_task(TaskKind::StackCube);
+    let cube = Vector3::new(0.24, -0.03, 0.015);
+    let mut plan = Plan::new(&[0.0; 6], cube, -0.3, &config, &mut rng).unwrap();
+    // The cube hangs 1 cm off the grasp point (beyond what the held-offset estimate saw).
+    let held_off = Vector3::new(0.01, -0.006, 0.0);
+    let mut arm = [0.0; 6];
+    let mut lowest_closed = (f64::INFINITY, Vector3::zeros());
+    while !plan.finished() {
+        let at: ArmPositions = std::array::from_fn(|j| arm[j]);
+        let tip = kinematics::task_pose(&at).position;
+        let lifted = arm[5] < 0.5 && tip.z > 0.05;
+        let cube_now = if lifted { tip + held_off } else { cube };
+        arm = plan.step(PERIOD, &arm, Some((cube_now, 0.0)), &config, &mut rng);
+        arm[5] = arm[5].max(HOLDING);
+        let near_the_base = (tip.xy() - config.stack_base.xy()).norm() < 0.03;
+        if arm[5] < 0.5 && tip.z < lowest_closed.0 && near_the_base {
+            lowest_closed = (tip.z, tip);
+        }
+    }
+    // Set down with the cube, not the grasp point, over the green cube.
+    let (_, tip) = lowest_closed;
+    let cube_there = tip + held_off;
+    assert!(
+        (cube_there.xy() - config.stack_base.xy()).norm() < SET_DOWN_TOLERANCE + 0.002,
+        "{cube_there:?}"
+    );
+}
