@@ -398,8 +398,8 @@ impl Plan {
     }
 
     /// From wherever the arm is: above the grasp, down to it, then the task's part: close, lift,
-    /// carry, release (cube_to_bin over the bin, place_cube down on the pad); close, lift, hold
-    /// (lift_cube); hold there (the touch tasks).
+    /// carry, release (cube_to_bin over the bin, place_cube down on the pad, stack_cube down on
+    /// the green cube); close, lift, hold (lift_cube); hold there (the touch tasks).
     fn pick_and_place(&self, grasp: TaskPose, approach_s: f64) -> Vec<Waypoint> {
         let (open, closed) = (self.gripper_open, self.gripper_closed);
         let waypoint = |pose: TaskPose, gripper: f64, duration: f64, gate: Gate| Waypoint {

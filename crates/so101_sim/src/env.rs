@@ -46,7 +46,8 @@ pub const SETTLE_SECONDS: f64 = 0.3;
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct TaskSettings {
     pub kind: TaskKind,
-    /// cube_to_bin only: staged dense shaping instead of the sparse reward.
+    /// The goal tasks (cube_to_bin, lift_cube, place_cube, push_cube, stack_cube): their dense
+    /// shaping instead of the sparse reward.
     pub dense_reward: bool,
 }
 

@@ -120,13 +120,15 @@ impl TaskObservation {
             && self.resting_let_go(self.cube_rest_height)
     }
 
-    /// The cube resting on the green cube (which stands on the table), no jaw touching it.
+    /// The cube resting on the green cube (which stands on the table), no jaw touching it: its
+    /// centre over the green cube's top face, whichever way either is turned (within the face's
+    /// inscribed circle), so it stays there; at the height of a cube lying on it.
     pub fn stacked(&self) -> bool {
         let Some(base) = self.stack_base else {
             return false;
         };
         let base_standing = (base.centre.z - base.rest_height).abs() < PLACED_HEIGHT_TOLERANCE;
-        let over_base = (self.cube - base.centre).xy().norm() < 2.0 * base.half_edge;
+        let over_base = (self.cube - base.centre).xy().norm() < base.half_edge;
         base_standing
             && over_base
             && self.resting_let_go(self.cube_rest_height + 2.0 * base.half_edge)
@@ -418,8 +420,11 @@ mod tests {
             ..base
         });
         assert!(!evaluate(TaskKind::StackCube, false, &obs).success);
-        // Beside it on the table, or in a scene without the green cube: no.
+        // At the height of a stack but with its centre past the green cube's edge (tipping off),
+        // beside it on the table, or in a scene without the green cube: no.
         obs.stack_base = standing;
+        obs.cube = Vector3::new(0.2, 0.197, 0.045);
+        assert!(!evaluate(TaskKind::StackCube, false, &obs).success);
         obs.cube = Vector3::new(0.2, 0.215, 0.015);
         assert!(!evaluate(TaskKind::StackCube, false, &obs).success);
         obs.cube = Vector3::new(0.21, 0.18, 0.045);

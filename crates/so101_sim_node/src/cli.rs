@@ -40,7 +40,7 @@ pub struct Args {
     /// Task that defines /task/reward and /task/success.
     #[arg(long, value_enum, default_value = "cube_to_bin")]
     pub task: TaskKind,
-    /// cube_to_bin only: dense shaping for approach, grasp, lift and place instead of a sparse reward.
+    /// The goal tasks (all but the touch tasks): their dense shaping instead of a sparse reward.
     #[arg(long)]
     pub dense_reward: bool,
     /// Seed of the cube placement on /sim/reset: the same seed gives the same sequence of episodes.
