@@ -256,10 +256,7 @@ fn grasp_pose(at: Vector3<f64>, yaw: f64) -> Option<TaskPose> {
     // The fixed jaw's pad touches the cube's face when the grasp point is on the cube's centre:
     // come down shifted away from the fixed jaw (the jaw axis points from it to the moving
     // jaw), which then pushes the cube onto the pad as it closes.
-    let limits = kinematics::arm_limits();
-    let solution = kinematics::solve(&grasp, &[0.0; ARM_JOINTS], &limits, &IkOptions::default());
-    let jaw_axis = kinematics::grasp_frame(&solution.joints).rotation * Vector3::x();
-    let shifted = grasp.position - Vector3::new(jaw_axis.x, jaw_axis.y, 0.0) * JAW_CLEARANCE;
+    let shifted = clear_of(grasp).position;
     // The arm's heading changes a little with the shift: align the jaws for the new one.
     Some(reachable_pose(shifted, yaw).unwrap_or(TaskPose {
         position: shifted,
@@ -270,13 +267,19 @@ fn grasp_pose(at: Vector3<f64>, yaw: f64) -> Option<TaskPose> {
 /// `release` moved horizontally away from the fixed jaw by [`JAW_CLEARANCE`] (the jaw axis points
 /// from it to the moving jaw).
 fn clear_of(release: TaskPose) -> TaskPose {
-    let limits = kinematics::arm_limits();
-    let solution = kinematics::solve(&release, &[0.0; ARM_JOINTS], &limits, &IkOptions::default());
-    let jaw_axis = kinematics::grasp_frame(&solution.joints).rotation * Vector3::x();
     TaskPose {
-        position: release.position - Vector3::new(jaw_axis.x, jaw_axis.y, 0.0) * JAW_CLEARANCE,
+        position: release.position - horizontal_jaw_axis(&release) * JAW_CLEARANCE,
         ..release
     }
+}
+
+/// The horizontal part of the jaw axis (from the fixed jaw to the moving one) with the arm at
+/// `pose` (the IK's solution from home).
+fn horizontal_jaw_axis(pose: &TaskPose) -> Vector3<f64> {
+    let limits = kinematics::arm_limits();
+    let solution = kinematics::solve(pose, &[0.0; ARM_JOINTS], &limits, &IkOptions::default());
+    let jaw_axis = kinematics::grasp_frame(&solution.joints).rotation * Vector3::x();
+    Vector3::new(jaw_axis.x, jaw_axis.y, 0.0)
 }
 
 /// Carrying, only the position matters: the steepest pitch the arm reaches there.

@@ -6,8 +6,8 @@ use std::f64::consts::{FRAC_PI_2, PI};
 
 use nalgebra::Vector3;
 
-use super::{reachable_pose_with, APPROACH_ABOVE_CUBE, GRASP_ABOVE_TABLE};
-use crate::kinematics::{self, IkOptions, TaskPose, ARM_JOINTS};
+use super::{horizontal_jaw_axis, reachable_pose_with, APPROACH_ABOVE_CUBE, GRASP_ABOVE_TABLE};
+use crate::kinematics::{self, TaskPose};
 
 /// The cube's centre within this of the target needs no other push (m): well inside the 3 cm the
 /// task asks. Nearer, another push would start from a line of a few millimetres in any direction,
@@ -87,11 +87,7 @@ fn fingers_pose(fingers: Vector3<f64>, direction: Vector3<f64>) -> Option<TaskPo
     [0.0, PI, -PI].into_iter().find_map(|turn| {
         let roll = |heading: f64| half_turn(heading - push_angle) + turn;
         let first = reachable_pose_with(fingers, roll)?;
-        let limits = kinematics::arm_limits();
-        let solution =
-            kinematics::solve(&first, &[0.0; ARM_JOINTS], &limits, &IkOptions::default());
-        let jaw_axis = kinematics::grasp_frame(&solution.joints).rotation * Vector3::x();
-        let forward = Vector3::new(jaw_axis.x, jaw_axis.y, 0.0) * FINGERS_BEHIND_GRASP_POINT;
+        let forward = horizontal_jaw_axis(&first) * FINGERS_BEHIND_GRASP_POINT;
         reachable_pose_with(fingers + forward, roll)
     })
 }
@@ -111,6 +107,7 @@ fn half_turn(angle: f64) -> f64 {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::kinematics::{IkOptions, ARM_JOINTS};
 
     #[test]
     fn the_fingers_push_across_the_line_to_the_goal() {
