@@ -387,6 +387,8 @@ def wait_until(
             sim.assert_alive()
         if time.monotonic() >= deadline:
             detail = f": {explain()}" if explain is not None else ""
+            if sim is not None:
+                detail += f"\n{sim.describe()} log:\n{sim.log_tail()}"
             pytest.fail(f"timeout after {timeout:.1f} s waiting for {what}{detail}", pytrace=False)
         time.sleep(period)
 
