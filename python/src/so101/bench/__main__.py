@@ -22,6 +22,7 @@ from . import (
     sim_core,
     storage,
     sysid,
+    train_step,
 )
 
 BENCHMARKS = {
@@ -42,6 +43,7 @@ BENCHMARKS = {
         latency,
         servo_model,
         sysid,
+        train_step,
     )
 }
 
