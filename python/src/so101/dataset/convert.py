@@ -220,6 +220,9 @@ def quiet_video_encoder() -> None:
     import av.logging
 
     av.logging.set_level(av.logging.WARNING)
+    # LeRobot hands FFmpeg's own logger back after every encode (restore_default_callback), which
+    # then printed a line per video it joined (hundreds for 100 episodes): its threshold too.
+    av.logging.set_libav_level(av.logging.WARNING)
 
 
 class PartError(Exception):

@@ -264,4 +264,7 @@ def join(repo_id: str, roots: list[Path], output: Path) -> None:
         return
     from lerobot.datasets.aggregate import aggregate_datasets
 
+    from ..dataset.convert import quiet_video_encoder
+
+    quiet_video_encoder()  # joining the shards' videos printed a muxer line per video
     aggregate_datasets(repo_ids=[repo_id] * len(roots), aggr_repo_id=repo_id, roots=roots, aggr_root=output)
