@@ -96,6 +96,19 @@ def show_on_failure(request: pytest.FixtureRequest, nodes: list[SimNode]) -> Non
     groups.append(nodes)
 
 
+@pytest.fixture(autouse=True)
+def no_node_outlives_its_test():
+    """Every node a test started is stopped when the test ends, whatever happened (after the
+    factories' own teardown, which checks exit codes). One left running by a failed test kept
+    publishing on the worker's DDS domain into the tests after it: one failure became four. Nodes
+    of module- and session-scoped fixtures are started before this and left alone."""
+    first = len(SimNode.started)
+    yield
+    for node in SimNode.started[first:]:
+        node.stop()
+    del SimNode.started[first:]
+
+
 @pytest.fixture
 def sim_factory(request: pytest.FixtureRequest, tmp_path: Path):
     """start(*args, lite=True) -> SimNode: starts $SO101_BIN_DIR/so101_sim_node with the given flags

@@ -99,6 +99,9 @@ def node_environment() -> dict[str, str]:
 class SimNode:
     """One running so101_sim_node; stdout+stderr go to a log file shown when a test fails."""
 
+    # Every node started, in order: conftest stops those a test left running (see its fixture).
+    started: list[SimNode] = []
+
     def __init__(self, binary: Path, args: list[str], log_path: Path):
         self.args = list(args)
         self.command = [str(binary), *self.args]
@@ -116,6 +119,7 @@ class SimNode:
             stderr=subprocess.STDOUT,
         )
         self.started_at = time.monotonic()
+        SimNode.started.append(self)
         self._stopped = False
         self._stop_result: int | None = None
 
