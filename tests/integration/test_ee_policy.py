@@ -119,20 +119,15 @@ def test_an_end_effector_policy_drives_the_arm_s_driver(ee_policy, arm_factory, 
 
     arm, _emulator = arm_factory()
     cameras = SimNode(node_binary("so101_camera_node"), ["--camera", "top=fake:64x48@30"], tmp_path / "camera_node.log")
-    try:
-        states = ros.subscribe("/joint_states", JointState, best_effort_qos())
-        commands = ros.subscribe("/joint_commands", JointState, reliable_qos(1000))
-        first = states.next_message(20.0, arm)
-        before = np.array([dict(zip(first.name, first.position))[j] for j in JOINTS])
-        done = run([VENV_BIN / "so101-run-policy", ee_policy, "--duration", "3", "--compressed"], 120)
-        assert done.returncode == 0, done.stdout[-3000:] + done.stderr[-3000:]
-        assert "end-effector targets out of reach" in done.stdout, done.stdout
-        arm.assert_alive()
-    finally:
-        # Stopped whatever happened: left running, it published on this worker's DDS domain into
-        # the tests after it (a failure here once became four).
-        camera_exit = cameras.stop()
-    assert camera_exit == 0, cameras.log_tail()
+    states = ros.subscribe("/joint_states", JointState, best_effort_qos())
+    commands = ros.subscribe("/joint_commands", JointState, reliable_qos(1000))
+    first = states.next_message(20.0, arm)
+    before = np.array([dict(zip(first.name, first.position))[j] for j in JOINTS])
+    done = run([VENV_BIN / "so101-run-policy", ee_policy, "--duration", "3", "--compressed"], 120)
+    assert done.returncode == 0, done.stdout[-3000:] + done.stderr[-3000:]
+    assert "end-effector targets out of reach" in done.stdout, done.stdout
+    arm.assert_alive()
+    assert cameras.stop() == 0, cameras.log_tail()
     received = commands.messages()
     assert received, "no command reached the driver"
     positions = np.array([msg.position for msg in received])
