@@ -37,10 +37,12 @@ TASKS = ("lift_cube", "cube_to_bin")
 def fine_tuned(tmp_path_factory):
     """(checkpoint, dataset, home): the tiny SmolVLA fine-tuned a few steps on a two-task dataset."""
     home = tmp_path_factory.mktemp("vla")
+    # Whether the expert succeeded does not matter to a few fine-tuning steps, and through the stack
+    # it is timing's to decide (a fresh CI run lost seed 3's cube_to_bin episode): kept either way.
     for task in TASKS:
         done = run(
             [BIN / "so101-learn", "demos", "--task", task, "--episodes", "1", "--cameras", CAMERAS, "--lite",
-             "--no-environment-state", "--seed", "3", "--output", home / task],
+             "--no-environment-state", "--seed", "3", "--keep-failures", "--output", home / task],
             300,
             home,
         )  # fmt: skip
@@ -52,7 +54,7 @@ def fine_tuned(tmp_path_factory):
         300,
         home,
     )  # fmt: skip
-    assert done.returncode == 0 and "2 episode(s) (2 successful)" in done.stdout, done.stdout + done.stderr
+    assert done.returncode == 0 and "2 episode(s)" in done.stdout, done.stdout + done.stderr
 
     done = run([VLA_BIN / "python", TINY_VLA, "make", home], 300, home)
     assert done.returncode == 0, (done.stdout + done.stderr)[-4000:]
