@@ -6,6 +6,7 @@ so101_sim_node process wrapper, and an rclpy probe node spinning in a background
 
 from __future__ import annotations
 
+import contextlib
 import math
 import os
 import shlex
@@ -588,4 +589,45 @@ def offline_env(home: Path) -> dict[str, str]:
 
 def run_offline(argv: list, timeout: float, home: Path) -> subprocess.CompletedProcess:
     """A LeRobot or so101 command in offline_env(home), its output captured."""
-    return subprocess.run([str(a) for a in argv], capture_output=True, text=True, timeout=timeout, env=offline_env(home))
+    return run_or_dump_stacks(argv, timeout, offline_env(home))
+
+
+def run_or_dump_stacks(argv: list, timeout: float, env: dict[str, str]) -> subprocess.CompletedProcess:
+    """A command, its output captured. When it runs over `timeout`, every Python process of it prints
+    its threads' stacks (faulthandler, on SIGABRT) and the test fails with them: a hang on a CI
+    machine says where it hung (a 2-process training once hung after "Creating dataset")."""
+    argv = [str(a) for a in argv]
+    process = subprocess.Popen(
+        argv, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env={**env, "PYTHONFAULTHANDLER": "1"}
+    )
+    try:
+        stdout, stderr = process.communicate(timeout=timeout)
+    except subprocess.TimeoutExpired:
+        for pid in [*reversed(descendants(process.pid)), process.pid]:  # the workers first
+            with contextlib.suppress(ProcessLookupError):
+                os.kill(pid, signal.SIGABRT)
+        try:
+            stdout, stderr = process.communicate(timeout=30)
+        except subprocess.TimeoutExpired:
+            for pid in [*descendants(process.pid), process.pid]:
+                with contextlib.suppress(ProcessLookupError):
+                    os.kill(pid, signal.SIGKILL)
+            stdout, stderr = process.communicate()
+        pytest.fail(f"{shlex.join(argv)[:300]} ran over {timeout} s; its processes' stacks:\n{stderr[-15000:]}\n{stdout[-3000:]}")
+    return subprocess.CompletedProcess(argv, process.returncode, stdout, stderr)
+
+
+def descendants(pid: int) -> list[int]:
+    """The processes below `pid`, parents before their children (from /proc)."""
+    children: dict[int, list[int]] = {}
+    for stat in Path("/proc").glob("[0-9]*/stat"):
+        with contextlib.suppress(OSError, ValueError, IndexError):
+            # "pid (comm) state ppid ...": comm may hold spaces, so split after its closing parenthesis.
+            ppid = int(stat.read_text().rsplit(")", 1)[1].split()[1])
+            children.setdefault(ppid, []).append(int(stat.parent.name))
+    found, queue = [], [pid]
+    while queue:
+        for child in children.get(queue.pop(0), []):
+            found.append(child)
+            queue.append(child)
+    return found

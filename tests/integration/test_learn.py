@@ -14,13 +14,14 @@ import sys
 from pathlib import Path
 
 import pytest
+from harness import run_or_dump_stacks
 
 VENV_BIN = Path(sys.executable).parent
 
 
 def learn(*argv: str, timeout: float) -> subprocess.CompletedProcess:
     env = {**os.environ, "HF_HUB_OFFLINE": "1", "WANDB_MODE": "disabled"}
-    done = subprocess.run([str(VENV_BIN / "so101-learn"), *argv], capture_output=True, text=True, timeout=timeout, env=env)
+    done = run_or_dump_stacks([VENV_BIN / "so101-learn", *argv], timeout, env)
     assert done.returncode == 0, done.stdout[-3000:] + done.stderr[-3000:]
     return done
 
