@@ -28,6 +28,8 @@ from pathlib import Path
 
 import numpy as np
 
+from .parquet import read_parquet
+
 # LeRobotDataset's default tolerance_s: how far a frame's timestamp may be from its k/fps slot,
 # and a video frame from the timestamp it is queried at.
 TOLERANCE_S = 1e-4
@@ -72,7 +74,7 @@ def _read_episodes(root: Path):
     files = sorted((root / "meta" / "episodes").glob("chunk-*/file-*.parquet"))
     if not files:
         raise ValueError("no meta/episodes/chunk-*/file-*.parquet")
-    frames = [pd.read_parquet(f, columns=None) for f in files]
+    frames = [read_parquet(f) for f in files]
     episodes = pd.concat(frames, ignore_index=True)
     return episodes.sort_values("episode_index").reset_index(drop=True)
 
@@ -226,7 +228,6 @@ def check_stats(root: Path, features: dict) -> list[Finding]:
 def check_dataset(root: Path | str, tolerance_s: float = TOLERANCE_S, quiet: bool = True) -> tuple[list[Finding], dict]:
     """All checks of the dataset at `root`; the findings and a summary (episodes, frames, video
     frames decoded)."""
-    import pandas as pd
 
     root = Path(root)
     summary = {"episodes": 0, "frames": 0, "video_frames": 0}
@@ -265,7 +266,7 @@ def check_dataset(root: Path | str, tolerance_s: float = TOLERANCE_S, quiet: boo
     for (chunk, file), members in by_file.items():
         relative = info["data_path"].format(chunk_index=chunk, file_index=file)
         try:
-            data = pd.read_parquet(root / relative)
+            data = read_parquet(root / relative)
         except Exception as error:  # noqa: BLE001
             for i in members:
                 findings.append(Finding(int(episodes["episode_index"].iat[i]), "layout", f"{relative} unreadable ({error})"))

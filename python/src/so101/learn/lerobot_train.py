@@ -34,6 +34,7 @@ import time
 from pathlib import Path
 
 from .. import contract
+from ..dataset.parquet import read_parquet
 from ..paths import repo_root
 from .eval_recipe import run_policy_command
 
@@ -290,10 +291,8 @@ def launcher(args) -> list[str]:
 
 def dataset_texts(dataset: Path) -> list[str]:
     """The task texts of the dataset's episodes (meta/tasks.parquet; none when unreadable)."""
-    import pandas as pd
-
     try:
-        return list(pd.read_parquet(Path(dataset) / "meta" / "tasks.parquet").index)
+        return list(read_parquet(Path(dataset) / "meta" / "tasks.parquet").index)
     except (OSError, ValueError):
         return []
 
