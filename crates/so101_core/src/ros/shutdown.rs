@@ -1,5 +1,10 @@
 //! Clean shutdown on SIGINT/SIGTERM: the first signal asks every loop to stop so publishers are
 //! dropped and the DDS participant says goodbye to its peers; a second signal exits at once.
+//!
+//! Also on SIGCONT, the resumption after a stop (Ctrl+Z then `fg`): the stop interrupts the DDS
+//! library's waits, and RustDDS 0.15.1 ends its event loop and discovery threads on that error
+//! (EINTR), so the resumed process could no longer hear or reach a peer. It says so and stops
+//! cleanly instead of running on deaf and mute; start it again.
 
 use std::sync::{
     atomic::{AtomicBool, Ordering},
@@ -7,7 +12,7 @@ use std::sync::{
 };
 
 use signal_hook::{
-    consts::{SIGINT, SIGTERM},
+    consts::{SIGCONT, SIGINT, SIGTERM},
     iterator::Signals,
 };
 
@@ -40,20 +45,39 @@ impl Shutdown {
     /// process (a device left in a safe state when the clean shutdown is cut short).
     pub fn on_signals_then(last_words: impl FnOnce() + Send + 'static) -> std::io::Result<Self> {
         let shutdown = Self::new();
-        let mut signals = Signals::new([SIGINT, SIGTERM])?;
+        let mut signals = Signals::new([SIGINT, SIGTERM, SIGCONT])?;
         let handle = shutdown.clone();
         std::thread::Builder::new()
             .name("signals".into())
             .spawn(move || {
-                let mut forever = signals.forever();
-                if let Some(signal) = forever.next() {
-                    tracing::info!(signal, "shutdown requested");
-                    handle.request();
-                }
-                if forever.next().is_some() {
-                    tracing::warn!("second signal: exiting without cleanup");
-                    last_words();
-                    std::process::exit(130);
+                let mut requests = 0;
+                let mut last_words = Some(last_words);
+                for signal in signals.forever() {
+                    if signal == SIGCONT {
+                        // `timeout` and a shell's kill send SIGCONT after their SIGTERM: only a
+                        // resumption before any request counts.
+                        if requests == 0 {
+                            tracing::error!(
+                                "resumed after a stop (Ctrl+Z, a debugger): the DDS library's \
+                                 threads end when a stop interrupts them, so this node can no \
+                                 longer reach its peers; stopping: start it again"
+                            );
+                            requests += 1;
+                            handle.request();
+                        }
+                        continue;
+                    }
+                    requests += 1;
+                    if requests == 1 {
+                        tracing::info!(signal, "shutdown requested");
+                        handle.request();
+                    } else {
+                        tracing::warn!("second signal: exiting without cleanup");
+                        if let Some(last_words) = last_words.take() {
+                            last_words();
+                        }
+                        std::process::exit(130);
+                    }
                 }
             })?;
         Ok(shutdown)
