@@ -228,7 +228,6 @@ def check_stats(root: Path, features: dict) -> list[Finding]:
 def check_dataset(root: Path | str, tolerance_s: float = TOLERANCE_S, quiet: bool = True) -> tuple[list[Finding], dict]:
     """All checks of the dataset at `root`; the findings and a summary (episodes, frames, video
     frames decoded)."""
-
     root = Path(root)
     summary = {"episodes": 0, "frames": 0, "video_frames": 0}
     info, findings = _read_info(root)
