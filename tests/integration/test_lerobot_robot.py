@@ -412,6 +412,6 @@ def test_connect_names_the_silent_topic(tmp_path):
     from so101.lerobot.robot import SO101ROS, SO101ROSConfig
 
     robot = SO101ROS(SO101ROSConfig(namespace="nobody", calibration_dir=tmp_path, connect_timeout_s=1.0))
-    with pytest.raises(TimeoutError, match="/nobody/joint_states"):
+    with pytest.raises(TimeoutError, match="/nobody/joint_states: 0 publisher"):
         robot.connect()
     assert not robot.is_connected

@@ -115,6 +115,17 @@ class SO101ROS(Robot):
                     return
                 raise
 
+    def _publishers_seen(self, topics: list[str]) -> str:
+        """What discovery found for each silent topic: no publisher at all points at the node or
+        the domain, a publisher that sends nothing here at QoS or at the DDS link between the two."""
+        seen = []
+        for topic in topics:
+            nodes = sorted(
+                {f"{info.node_namespace.rstrip('/')}/{info.node_name}" for info in self._node.get_publishers_info_by_topic(topic)}
+            )
+            seen.append(f"{topic}: {len(nodes)} publisher(s) discovered{' (' + ', '.join(nodes) + ')' if nodes else ''}")
+        return "; ".join(seen)
+
     def _wait_for_inputs(self) -> None:
         deadline = time.monotonic() + self.config.connect_timeout_s
         while True:
@@ -126,7 +137,8 @@ class SO101ROS(Robot):
             if time.monotonic() > deadline:
                 raise TimeoutError(
                     f"so101_ros: nothing on {', '.join(missing)} within {self.config.connect_timeout_s} s "
-                    "(is so101_sim_node or so101_feetech_driver running in this namespace and ROS domain?)"
+                    f"({self._publishers_seen(missing)}; "
+                    "is so101_sim_node or so101_feetech_driver running in this namespace and ROS domain?)"
                 )
             time.sleep(0.02)
         from ...messages import image_size
