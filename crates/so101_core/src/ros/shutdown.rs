@@ -50,32 +50,27 @@ impl Shutdown {
         std::thread::Builder::new()
             .name("signals".into())
             .spawn(move || {
-                let mut requests = 0;
-                let mut last_words = Some(last_words);
+                let mut requested = false;
                 for signal in signals.forever() {
                     if signal == SIGCONT {
                         // `timeout` and a shell's kill send SIGCONT after their SIGTERM: only a
                         // resumption before any request counts.
-                        if requests == 0 {
+                        if !requested {
                             tracing::error!(
                                 "resumed after a stop (Ctrl+Z, a debugger): the DDS library's \
                                  threads end when a stop interrupts them, so this node can no \
                                  longer reach its peers; stopping: start it again"
                             );
-                            requests += 1;
+                            requested = true;
                             handle.request();
                         }
-                        continue;
-                    }
-                    requests += 1;
-                    if requests == 1 {
+                    } else if !requested {
                         tracing::info!(signal, "shutdown requested");
+                        requested = true;
                         handle.request();
                     } else {
                         tracing::warn!("second signal: exiting without cleanup");
-                        if let Some(last_words) = last_words.take() {
-                            last_words();
-                        }
+                        last_words();
                         std::process::exit(130);
                     }
                 }
