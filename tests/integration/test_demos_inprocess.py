@@ -27,8 +27,9 @@ STACK = ["--speed", "2"]
 # door's: the expert sees each /joint_states a wall-clock latency late, which costs `speed` times
 # as many frames at each gate of its plan (at twice real time beside the suite's other worker, 19
 # frames over an episode), and a stall of teleop_node or the sim holds a command for frames. In
-# real time, on a CI machine loaded 1.5 times more than usual, two commands held for a second
-# frame each bent the arm's path 2.8 units off the in-process one (episode 0, frames 26-39).
+# real time, on a 2-core machine that leftover processes of another experiment loaded beside the
+# suite (its tests 1.5 times slower), two commands held for a second frame each bent the arm's
+# path 2.8 units off the in-process one (episode 0, frames 26-39).
 STACK_TIMED = ["--speed", "0.5"]
 
 
