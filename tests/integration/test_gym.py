@@ -79,6 +79,31 @@ def test_a_lost_reply_to_the_first_reset_restarts_the_node_with_the_same_seed():
         local.close()
 
 
+def test_a_participant_blind_to_the_node_is_replaced(monkeypatch, caplog):
+    """Fast DDS can miss a starting node's publications for good (so101.stack.discovery): the env
+    then replaces its participant. The blindness is made here: the env's first participant opens
+    in another ROS domain than the node it starts."""
+    import os
+
+    import gymnasium as gym
+
+    node_domain = os.environ.get("ROS_DOMAIN_ID", "0")
+    monkeypatch.setenv("ROS_DOMAIN_ID", str((int(node_domain) + 1) % 100))
+    ros = gym.make("so101:so101/CubeToBin-v0", backend="ros")
+    local = gym.make("so101/CubeToBin-v0")
+    monkeypatch.setenv("ROS_DOMAIN_ID", node_domain)
+    try:
+        ros_observation, _ = ros.reset(seed=3)
+        local_observation, _ = local.reset(seed=3)
+        assert "starting a fresh DDS participant" in caplog.text
+        ros_observation, *_ = ros.step(local_observation["agent_pos"])
+        local_observation, *_ = local.step(local_observation["agent_pos"])
+        assert np.abs(state_of(ros_observation) - state_of(local_observation)).max() <= 1e-9
+    finally:
+        ros.close()
+        local.close()
+
+
 def test_with_cameras_each_step_brings_the_frames_of_its_state():
     import gymnasium as gym
 

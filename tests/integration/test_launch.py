@@ -198,3 +198,25 @@ def test_a_timed_session_on_the_sim_resets_the_scene_before_each_episode(tmp_pat
             )
     resets = (logs / "so101_sim_node.log").read_text().count("new episode")
     assert resets == 2, f"{resets} resets of the sim for 2 episodes"
+
+
+def test_the_launcher_replaces_a_graph_participant_blind_to_a_node(tmp_path, monkeypatch):
+    """Fast DDS can miss a starting node's publications for good (so101.stack.discovery): while it
+    waits for a node's publisher, the launcher starts over on a fresh participant. The blindness
+    is made here: its first participant opens in another ROS domain than the node's."""
+    from so101.paths import node_binary
+    from so101.stack.launch import Launch
+    from so101.stack.launch_plan import NodeSpec
+
+    launch = Launch(tmp_path, ready_timeout=20.0, stop_timeout=10.0, namespace="")
+    node_domain = os.environ.get("ROS_DOMAIN_ID", "0")
+    monkeypatch.setenv("ROS_DOMAIN_ID", str((int(node_domain) + 1) % 100))
+    launch.graph_node()
+    monkeypatch.setenv("ROS_DOMAIN_ID", node_domain)
+    try:
+        spec = NodeSpec("sim", [str(node_binary("so101_sim_node")), "--lite"], ready="publisher /joint_states")
+        sim = launch.start(spec)  # SystemExit after ready_timeout, were the blind participant kept
+        assert sim.process.poll() is None
+    finally:
+        launch.stop_all()
+    assert sim.process.returncode == 0, (tmp_path / "sim.log").read_text()

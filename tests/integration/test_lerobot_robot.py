@@ -65,14 +65,9 @@ def run(argv: list[str], env: dict, timeout: float, log: Path) -> str:
 
 @pytest.fixture(scope="module")
 def ros_probe():
-    import rclpy
-
-    context = rclpy.Context()
-    rclpy.init(context=context)
-    probe = Probe(context, "so101_robot_plugin_probe")
+    probe = Probe("so101_robot_plugin_probe")
     yield probe
     probe.close()
-    rclpy.try_shutdown(context=context)
 
 
 # RECORDING_ALONE: lerobot-record keeps its loop on its own clock and drops the frame of a late
@@ -409,9 +404,42 @@ def test_the_robot_sees_through_so101_camera_node_s_jpeg_frames(arm_factory, tmp
 
 
 def test_connect_names_the_silent_topic(tmp_path):
+    """A topic nobody publishes: after REDISCOVER_AFTER_S a second participant looks for it too,
+    and the error names the topic, its publisher count and both participants."""
     from so101.lerobot.robot import SO101ROS, SO101ROSConfig
+    from so101.stack.discovery import REDISCOVER_AFTER_S
 
-    robot = SO101ROS(SO101ROSConfig(namespace="nobody", calibration_dir=tmp_path, connect_timeout_s=1.0))
-    with pytest.raises(TimeoutError, match="/nobody/joint_states: 0 publisher"):
+    robot = SO101ROS(SO101ROSConfig(namespace="nobody", calibration_dir=tmp_path, connect_timeout_s=REDISCOVER_AFTER_S + 1.0))
+    with pytest.raises(TimeoutError, match="/nobody/joint_states: 0 publisher.*by the last of 2 DDS participant"):
         robot.connect()
     assert not robot.is_connected
+
+
+def test_connect_finds_a_driver_that_starts_after_a_fresh_participant(arm_factory, tmp_path, caplog):
+    """The driver starts after connect has given up on its first participant (so101.stack.discovery:
+    Fast DDS can miss a starting node for good): the fresh participant's subscriptions, command
+    publisher and spinning thread make a robot that reads and moves the arm."""
+    import threading
+
+    from so101.lerobot.robot import SO101ROS, SO101ROSConfig
+    from so101.stack.discovery import REDISCOVER_AFTER_S
+
+    robot = SO101ROS(SO101ROSConfig(id="arm", calibration_dir=tmp_path / "cal", connect_timeout_s=30.0))
+    started: list = []
+    late = threading.Timer(REDISCOVER_AFTER_S + 1.0, lambda: started.append(arm_factory()))
+    late.start()
+    try:
+        robot.connect()
+    finally:
+        late.join()
+    try:
+        assert "starting a fresh DDS participant" in caplog.text
+        ((node, _emulator),) = started
+
+        def reached() -> bool:
+            robot.send_action({"wrist_roll.pos": 15.0})  # the driver's watchdog wants a stream
+            return abs(robot.get_observation()["wrist_roll.pos"] - 15.0) < 1.5
+
+        wait_until(reached, 10.0, "the driver's wrist_roll at the action", node)
+    finally:
+        robot.disconnect()

@@ -241,3 +241,22 @@ def test_the_runner_reports_a_policy_it_cannot_load(tmp_path):
     done = run([VENV_BIN / "so101-run-policy", tmp_path / "no_such_policy", "--duration", "1"], timeout=120)
     assert done.returncode != 0
     assert "cannot load a LeRobot policy" in done.stderr and "Traceback" not in done.stderr, done.stderr[-2000:]
+
+
+def test_the_runner_replaces_a_participant_blind_to_the_arm_s_node(sim_factory, monkeypatch, caplog):
+    """Fast DDS can miss a starting node's publications for good (so101.stack.discovery): the live
+    runner's node then starts over on a fresh participant. The blindness is made here: its first
+    participant opens in another ROS domain than the sim's."""
+    from so101.evaluate.run_policy import LiveNode
+
+    sim = sim_factory("--cameras", "top:64x48", "--namespace", "blind")
+    node_domain = os.environ.get("ROS_DOMAIN_ID", "0")
+    monkeypatch.setenv("ROS_DOMAIN_ID", str((int(node_domain) + 1) % 100))
+    live = LiveNode("/blind", {"top": "/blind/camera/top/image_raw"}, cube_pose=True)
+    monkeypatch.setenv("ROS_DOMAIN_ID", node_domain)
+    try:
+        assert live.wait_for_inputs(["top"], max_age=1.0, timeout=20.0), live.inputs.stale(["top"], 1.0)
+        assert "no publisher of /blind/joint_states" in caplog.text and "starting a fresh DDS participant" in caplog.text
+        sim.assert_alive()
+    finally:
+        live.close()

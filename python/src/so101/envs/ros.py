@@ -63,14 +63,6 @@ class So101RosEnv(gym.Env):
         facts = task_facts(task)
         servo_params, randomize = servo_params_spec(servo_params), randomize_spec(randomize)
         self._camera_poses = camera_poses_spec(camera_poses)
-        import rclpy
-        from geometry_msgs.msg import PoseStamped
-        from rclpy.experimental import EventsExecutor
-        from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
-        from sensor_msgs.msg import Image, JointState
-        from std_msgs.msg import Bool, Float64, String
-        from std_srvs.srv import Trigger
-
         self.action_space = action_space()
         self._cameras = {name: (int(h), int(w)) for name, (h, w) in (cameras or {}).items()}
         self.observation_space = observation_space(self._cameras)
@@ -86,17 +78,33 @@ class So101RosEnv(gym.Env):
         self._namespace = f"gym_{os.getpid()}_{uuid.uuid4().hex[:8]}"
         self._process: subprocess.Popen | None = None
         self._log = tempfile.NamedTemporaryFile(prefix="so101_gym_sim_", suffix=".log", delete=False)
+        self._latest: dict = {}
+        self._counts = {"state": 0, "cube": 0, "reward": 0, "success": 0}
+        self._counts.update({f"camera/{name}": 0 for name in self._cameras})
+        self._awaited = None  # (counts to exceed, future) of the observation being waited for
+        self._episode_settings: list[str] = []  # /sim/episode messages, latest last
+        self._open_ros()
+        # Each command is one step (the node's --step-on-command); the benchmark's "before" row
+        # clears it to measure the previous /sim/step protocol.
+        self.node_flags = ["--step-on-command"]
+
+    def _open_ros(self) -> None:
+        """An rclpy context (its own DDS participant) with the env's subscriptions, command
+        publisher and reset client."""
+        import rclpy
+        from geometry_msgs.msg import PoseStamped
+        from rclpy.experimental import EventsExecutor
+        from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+        from sensor_msgs.msg import Image, JointState
+        from std_msgs.msg import Bool, Float64, String
+        from std_srvs.srv import Trigger
+
         self._context = rclpy.Context()
         rclpy.init(context=self._context)
         self._node = rclpy.create_node("so101_gym", context=self._context, start_parameter_services=False)
         self._executor = EventsExecutor(context=self._context)
         self._executor.add_node(self._node)
         ns = f"/{self._namespace}"
-        self._latest: dict = {}
-        self._counts = {"state": 0, "cube": 0, "reward": 0, "success": 0}
-        self._counts.update({f"camera/{name}": 0 for name in self._cameras})
-
-        self._awaited = None  # (counts to exceed, future) of the observation being waited for
 
         def keep(key):
             def callback(msg):
@@ -112,7 +120,6 @@ class So101RosEnv(gym.Env):
         self._node.create_subscription(PoseStamped, f"{ns}/{contract.CUBE_POSE}", keep("cube"), 10)
         self._node.create_subscription(Float64, f"{ns}/{contract.TASK_REWARD}", keep("reward"), 10)
         self._node.create_subscription(Bool, f"{ns}/{contract.TASK_SUCCESS}", keep("success"), 10)
-        self._episode_settings: list[str] = []  # /sim/episode messages, latest last
         latched = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL)
         self._node.create_subscription(
             String, f"{ns}/{contract.SIM_EPISODE}", lambda msg: self._episode_settings.append(msg.data), latched
@@ -122,10 +129,37 @@ class So101RosEnv(gym.Env):
         self._commands = self._node.create_publisher(JointState, f"{ns}/{contract.JOINT_COMMANDS}", 10)
         self._reset_client = self._node.create_client(Trigger, f"{ns}/{contract.SIM_RESET}")
         self._trigger = Trigger.Request
-        # Each command is one step (the node's --step-on-command); the benchmark's "before" row
-        # clears it to measure the previous /sim/step protocol.
-        self.node_flags = ["--step-on-command"]
         self._JointState = JointState
+        self._looking_since = time.monotonic()  # for the node's endpoints (_rediscover_if_blind)
+
+    def _close_ros(self) -> None:
+        import rclpy
+
+        if self._context.ok():
+            self._executor.shutdown(timeout_sec=1)
+            self._node.destroy_node()
+            rclpy.try_shutdown(context=self._context)
+
+    def _reset_service_ready(self) -> bool:
+        if self._reset_client.service_is_ready():
+            return True
+        self._rediscover_if_blind()
+        return False
+
+    def _rediscover_if_blind(self) -> bool:
+        """Replaces the DDS participant when, REDISCOVER_AFTER_S after it opened or the node
+        started, it has discovered no publisher of the node's /joint_states (so101.stack.discovery);
+        True if it did."""
+        from ..stack.discovery import REDISCOVER_AFTER_S, without_publishers
+
+        if time.monotonic() - self._looking_since < REDISCOVER_AFTER_S:
+            return False
+        if not without_publishers(self._node, [f"/{self._namespace}/{contract.JOINT_STATES}"]):
+            return False
+        log.warning("no publisher of /%s/%s discovered: starting a fresh DDS participant", self._namespace, contract.JOINT_STATES)
+        self._close_ros()
+        self._open_ros()
+        return True
 
     # ------------------------------------------------------------------ plumbing
     def _spin_until(self, predicate, what: str, timeout: float | None = None) -> None:
@@ -203,7 +237,8 @@ class So101RosEnv(gym.Env):
         if self._dense_reward:
             command.append("--dense-reward")
         self._process = process.start(command, env=node_environment(), stdout=self._log, stderr=self._log)
-        self._spin_until(self._reset_client.service_is_ready, "/sim/reset")
+        self._looking_since = time.monotonic()
+        self._spin_until(self._reset_service_ready, "/sim/reset")
         self._spin_until(lambda: self._commands.get_subscription_count() > 0, "/joint_commands subscription")
         # Both directions of each service matched, and the start-up state taken in.
         settle = time.monotonic() + 0.5
@@ -289,11 +324,6 @@ class So101RosEnv(gym.Env):
         return observation, float(self._latest["reward"].data), terminated, False, {"is_success": success}
 
     def close(self):
-        import rclpy
-
         self._stop_sim()
-        if self._context.ok():
-            self._executor.shutdown(timeout_sec=1)
-            self._node.destroy_node()
-            rclpy.try_shutdown(context=self._context)
+        self._close_ros()
         self._log.close()

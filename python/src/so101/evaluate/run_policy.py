@@ -81,7 +81,10 @@ class LiveInputs:
         self.cube: tuple[float, object] | None = None
         self.wants_cube = cube_pose
         self.frames: dict[str, tuple[float, object]] = {}
+        # The topic of each input, by the name stale() gives it.
+        self.topics = {"/joint_states": f"{prefix}/{contract.JOINT_STATES}", **{f"camera {n}": t for n, t in cameras.items()}}
         if cube_pose:
+            self.topics["/cube/pose"] = f"{prefix}/{contract.CUBE_POSE}"
             node.create_subscription(
                 PoseStamped, f"{prefix}/{contract.CUBE_POSE}", lambda msg: setattr(self, "cube", (time.monotonic(), msg)), 10
             )
@@ -112,6 +115,55 @@ class LiveInputs:
         return [what for what, entry in inputs.items() if entry is None or now - entry[0] > max_age]
 
 
+class LiveNode:
+    """The runner's rclpy node with its inputs and command publisher, on a DDS participant that
+    reopen() replaces (so101.stack.discovery)."""
+
+    def __init__(self, prefix: str, cameras: dict[str, str], cube_pose: bool):
+        self._prefix, self._cameras, self._cube_pose = prefix, cameras, cube_pose
+        self._open()
+
+    def _open(self) -> None:
+        import rclpy
+        from sensor_msgs.msg import JointState
+
+        rclpy.init()
+        self.node = rclpy.create_node("so101_policy_runner")
+        self.inputs = LiveInputs(self.node, self._prefix, self._cameras, cube_pose=self._cube_pose)
+        self.commands = self.node.create_publisher(JointState, f"{self._prefix}/{contract.JOINT_COMMANDS}", 10)
+        self.opened = time.monotonic()
+
+    def close(self) -> None:
+        import rclpy
+
+        self.node.destroy_node()
+        rclpy.try_shutdown()
+
+    def wait_for_inputs(self, cameras: list[str], max_age: float, timeout: float) -> bool:
+        """Spins until every input is fresh; False when `timeout` seconds pass first. A participant
+        that has discovered no publisher of a missing input after REDISCOVER_AFTER_S is replaced."""
+        import rclpy
+
+        from ..stack.discovery import REDISCOVER_AFTER_S, without_publishers
+
+        deadline = time.monotonic() + timeout
+        while missing := self.inputs.stale(cameras, max_age):
+            if time.monotonic() > deadline:
+                return False
+            if time.monotonic() - self.opened > REDISCOVER_AFTER_S and (
+                unseen := without_publishers(self.node, [self.inputs.topics[what] for what in missing])
+            ):
+                log.warning(
+                    "no publisher of %s discovered in %.0f s: starting a fresh DDS participant",
+                    ", ".join(unseen),
+                    REDISCOVER_AFTER_S,
+                )
+                self.close()
+                self._open()
+            rclpy.spin_once(self.node, timeout_sec=0.05)
+        return True
+
+
 def run_live(args, policy: StackPolicy) -> int:
     import rclpy
     from sensor_msgs.msg import JointState
@@ -121,10 +173,7 @@ def run_live(args, policy: StackPolicy) -> int:
     leaf = contract.IMAGE_COMPRESSED if args.compressed else contract.IMAGE_RAW
     topics = {camera.name: f"{prefix}/{contract.camera_topic(camera.name, leaf)}" for camera in policy.cameras}
     topics.update(dict(item.split("=", 1) for item in args.camera))
-    rclpy.init()
-    node = rclpy.create_node("so101_policy_runner")
-    inputs = LiveInputs(node, prefix, topics, cube_pose=policy.needs_environment_state)
-    commands = node.create_publisher(JointState, f"{prefix}/{contract.JOINT_COMMANDS}", 10)
+    live = LiveNode(prefix, topics, cube_pose=policy.needs_environment_state)
     camera_names = [camera.name for camera in policy.cameras]
     period = 1.0 / args.fps
     steps = held = 0
@@ -132,25 +181,26 @@ def run_live(args, policy: StackPolicy) -> int:
     inference: list[float] = []
     try:
         if args.reset:
-            client = node.create_client(Trigger, f"{prefix}/{contract.SIM_RESET}")
-            if not spin_until(node, client.service_is_ready, 20.0):
+            client = live.node.create_client(Trigger, f"{prefix}/{contract.SIM_RESET}")
+            if not spin_until(live.node, client.service_is_ready, 20.0):
                 raise SystemExit(f"so101-run-policy: no {prefix}/sim/reset service within 20 s")
             future = client.call_async(Trigger.Request())
-            if not spin_until(node, future.done, 10.0) or not future.result().success:
+            if not spin_until(live.node, future.done, 10.0) or not future.result().success:
                 raise SystemExit(f"so101-run-policy: {prefix}/sim/reset did not succeed")
         deadline = time.monotonic() + args.startup_timeout
-        # The arm's node must hear the first command: wait until it has matched the publisher.
-        if not spin_until(node, lambda: commands.get_subscription_count() > 0, args.startup_timeout):
-            raise SystemExit(
-                f"so101-run-policy: no subscriber of {prefix}/joint_commands within "
-                f"{args.startup_timeout:.0f} s (is the arm's node running?)"
-            )
-        remaining = max(0.0, deadline - time.monotonic())
-        if not spin_until(node, lambda: not inputs.stale(camera_names, args.max_age), remaining):
-            missing = inputs.stale(camera_names, args.max_age)
+        if not live.wait_for_inputs(camera_names, args.max_age, args.startup_timeout):
+            missing = live.inputs.stale(camera_names, args.max_age)
             raise SystemExit(
                 f"so101-run-policy: nothing from {', '.join(missing)} within {args.startup_timeout:.0f} s "
                 "(is the arm's node running, with these cameras?)"
+            )
+        node, inputs, commands = live.node, live.inputs, live.commands
+        # The arm's node must hear the first command: wait until it has matched the publisher.
+        remaining = max(0.0, deadline - time.monotonic())
+        if not spin_until(node, lambda: commands.get_subscription_count() > 0, remaining):
+            raise SystemExit(
+                f"so101-run-policy: no subscriber of {prefix}/joint_commands within "
+                f"{args.startup_timeout:.0f} s (is the arm's node running?)"
             )
         # One inference before the clock starts: the first one (allocation, kernels) is slow.
         policy.act(
@@ -187,8 +237,7 @@ def run_live(args, policy: StackPolicy) -> int:
     except KeyboardInterrupt:
         pass
     finally:
-        node.destroy_node()
-        rclpy.try_shutdown()
+        live.close()
     mean_ms = 1000 * float(np.mean(inference)) if inference else 0.0
     # The accounting adds up: (commands + held periods) / fps + lost = the run's length, within a period.
     late, lost = (clock.late, clock.lost) if clock else (0, 0.0)

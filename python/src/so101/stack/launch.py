@@ -86,11 +86,23 @@ class Launch:
             self._graph = rclpy.create_node("so101_launch", start_parameter_services=False)
         return self._graph
 
+    def forget_graph_node(self) -> None:
+        """Ends the graph node and its DDS participant; graph_node() makes a fresh one."""
+        if self._graph is not None:
+            import rclpy
+
+            self._graph.destroy_node()
+            rclpy.try_shutdown()
+            self._graph = None
+
     def wait_ready(self, entry: Running) -> None:
         """Blocks until the node shows on the graph ("publisher TOPIC" / "subscriber TOPIC") or its
         file exists ("path P"); SystemExit when it dies or takes longer than the ready timeout."""
+        from .discovery import REDISCOVER_AFTER_S
+
         kind, _, what = entry.spec.ready.partition(" ")
         deadline = time.monotonic() + self.ready_timeout
+        looked = time.monotonic()
         while True:
             if entry.process.poll() is not None:
                 raise SystemExit(
@@ -107,6 +119,10 @@ class Launch:
                 up = True
             if up:
                 return
+            if kind == "publisher" and time.monotonic() - looked > REDISCOVER_AFTER_S:
+                # A node slow to start, or one this participant's discovery missed (so101.stack.discovery).
+                self.forget_graph_node()
+                looked = time.monotonic()
             if time.monotonic() > deadline:
                 raise SystemExit(
                     f"so101-launch: {entry.spec.name} not up within {self.ready_timeout:.0f} s "
@@ -157,12 +173,7 @@ class Launch:
                         other.stopped_by_us = True
                         other.process.kill()
                         other.process.wait()
-        if self._graph is not None:
-            import rclpy
-
-            self._graph.destroy_node()
-            rclpy.try_shutdown()
-            self._graph = None
+        self.forget_graph_node()
 
     def watch(self, bags: Path | None, session=None) -> Running | None:
         """Until a node exits; returns it (None when none is left, or when `session`, a

@@ -63,6 +63,16 @@ class SO101ROS(Robot):
     def connect(self, calibrate: bool = True) -> None:
         if self.is_connected:
             raise RuntimeError(f"{self} is already connected")
+        self._open()
+        try:
+            self._wait_for_inputs()
+        except Exception:
+            self.disconnect()
+            raise
+
+    def _open(self) -> None:
+        """A fresh rclpy context (its own DDS participant) with this robot's subscriptions, its
+        command publisher and a thread spinning them."""
         import rclpy
         from rclpy.executors import SingleThreadedExecutor
         from rclpy.qos import qos_profile_sensor_data
@@ -99,11 +109,6 @@ class SO101ROS(Robot):
         self._executor.add_node(node)
         self._thread = threading.Thread(target=self._spin, name="so101_ros-spin", daemon=True)
         self._thread.start()
-        try:
-            self._wait_for_inputs()
-        except Exception:
-            self.disconnect()
-            raise
 
     def _spin(self) -> None:
         executor, context = self._executor, self._context
@@ -115,31 +120,36 @@ class SO101ROS(Robot):
                     return
                 raise
 
-    def _publishers_seen(self, topics: list[str]) -> str:
-        """What discovery found for each silent topic: no publisher at all points at the node or
-        the domain, a publisher that sends nothing here at QoS or at the DDS link between the two."""
-        seen = []
-        for topic in topics:
-            nodes = sorted(
-                {f"{info.node_namespace.rstrip('/')}/{info.node_name}" for info in self._node.get_publishers_info_by_topic(topic)}
-            )
-            seen.append(f"{topic}: {len(nodes)} publisher(s) discovered{' (' + ', '.join(nodes) + ')' if nodes else ''}")
-        return "; ".join(seen)
+    def _missing_inputs(self) -> list[str]:
+        with self._lock:
+            missing = [] if self._state is not None else [self._resolved(self.config.joint_states_topic)]
+            missing += [self._resolved(c.topic) for n, c in self.config.cameras.items() if n not in self._frames]
+        return missing
 
     def _wait_for_inputs(self) -> None:
+        from ...stack.discovery import REDISCOVER_AFTER_S, publishers_seen, without_publishers
+
         deadline = time.monotonic() + self.config.connect_timeout_s
-        while True:
-            with self._lock:
-                missing = [] if self._state is not None else [self._resolved(self.config.joint_states_topic)]
-                missing += [self._resolved(c.topic) for n, c in self.config.cameras.items() if n not in self._frames]
-            if not missing:
-                break
-            if time.monotonic() > deadline:
+        opened, participants = time.monotonic(), 1
+        while missing := self._missing_inputs():
+            now = time.monotonic()
+            if now > deadline:
                 raise TimeoutError(
                     f"so101_ros: nothing on {', '.join(missing)} within {self.config.connect_timeout_s} s "
-                    f"({self._publishers_seen(missing)}; "
+                    f"({publishers_seen(self._node, missing)}, by the last of {participants} DDS participant(s); "
                     "is so101_sim_node or so101_feetech_driver running in this namespace and ROS domain?)"
                 )
+            unseen = without_publishers(self._node, missing)
+            if unseen and now - opened > REDISCOVER_AFTER_S:
+                # The node may be absent, or this participant's discovery missed it (so101.stack.discovery).
+                log.warning(
+                    "so101_ros: no publisher of %s discovered in %.0f s: starting a fresh DDS participant",
+                    ", ".join(unseen),
+                    REDISCOVER_AFTER_S,
+                )
+                self.disconnect()
+                self._open()
+                opened, participants = time.monotonic(), participants + 1
             time.sleep(0.02)
         from ...messages import image_size
 
