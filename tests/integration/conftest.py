@@ -246,17 +246,11 @@ def teleop_factory(request: pytest.FixtureRequest, tmp_path: Path):
 # =========================================================================== rclpy
 @pytest.fixture
 def ros():
-    """A fresh rclpy context (its own DDS participant, so no graph state leaks between tests) and
-    a probe node spinning in a background thread."""
+    """A probe node in a fresh rclpy context (its own DDS participant, so no graph state leaks
+    between tests), spinning in a background thread."""
     _refuse_outside_namespace()  # belt and braces: never open a participant outside the namespace
-    import rclpy
-    from rclpy.context import Context
-
-    context = Context()
-    rclpy.init(context=context)
-    probe = Probe(context, "so101_test_probe")
+    probe = Probe("so101_test_probe")
     try:
         yield probe
     finally:
         probe.close()
-        rclpy.try_shutdown(context=context)

@@ -210,10 +210,11 @@ def describe_returncode(code: int | None) -> str:
 class Inbox:
     """Messages of one subscription, with their local arrival times (time.monotonic)."""
 
-    def __init__(self, topic: str):
+    def __init__(self, topic: str, rediscover: Callable[[str], None] | None = None):
         self.topic = topic
         self._cond = threading.Condition()
         self._items: list[tuple[float, Any]] = []
+        self._rediscover = rediscover  # the probe's remedy for a participant blind to the topic
 
     def _push(self, msg: Any) -> None:
         now = time.monotonic()
@@ -244,9 +245,12 @@ class Inbox:
         self, predicate: Callable[[list[Any]], bool], timeout: float, what: str, sim: SimNode | None = None
     ) -> list[Any]:
         """Wait until predicate(messages) holds; fails the test with `what` on timeout (or node death)."""
+        from so101.stack.discovery import REDISCOVER_AFTER_S
+
         deadline = time.monotonic() + timeout
-        with self._cond:
-            while True:
+        next_look = time.monotonic() + REDISCOVER_AFTER_S
+        while True:
+            with self._cond:
                 msgs = [m for _, m in self._items]
                 if predicate(msgs):
                     return msgs
@@ -256,6 +260,9 @@ class Inbox:
                 if remaining <= 0:
                     break
                 self._cond.wait(min(remaining, 0.1))
+            if not msgs and self._rediscover is not None and time.monotonic() > next_look:
+                self._rediscover(self.topic)  # outside the lock: the spinning thread pushes under it
+                next_look = time.monotonic() + REDISCOVER_AFTER_S
         if sim is not None:
             sim.assert_alive()
         pytest.fail(f"timeout after {timeout:.1f} s on {self.topic}: {what} (received {len(msgs)} messages)", pytrace=False)
@@ -288,50 +295,98 @@ def best_effort_qos(depth: int = 100):
     )
 
 
-class Probe:
-    """An rclpy node spinning in a background thread, with helpers for the tests."""
+def fresh_participant_sees_publishers(topic: str, within: float = 2.0) -> bool:
+    """Whether a participant created now discovers a publisher of `topic` within `within` s."""
+    import rclpy
 
-    def __init__(self, context, name: str):
+    context = rclpy.Context()
+    rclpy.init(context=context)
+    try:
+        node = rclpy.create_node("so101_test_witness", context=context, start_parameter_services=False)
+        try:
+            deadline = time.monotonic() + within
+            while node.count_publishers(topic) == 0:
+                if time.monotonic() > deadline:
+                    return False
+                time.sleep(0.05)
+            return True
+        finally:
+            node.destroy_node()
+    finally:
+        rclpy.try_shutdown(context=context)
+
+
+class Probe:
+    """An rclpy node, in its own context (DDS participant), spinning in a background thread, with
+    helpers for the tests.
+
+    Fast DDS can miss a starting node's publications for good (so101.stack.discovery): a subscription
+    that has received nothing, while a fresh participant (a "witness") sees the topic's publishers
+    and this one sees none, makes the probe start over on a fresh participant with the same
+    subscriptions (the Inboxes keep what they had). Handles a test took from `node` directly
+    belong to the old participant then: only a probe that was blind ever starts over."""
+
+    def __init__(self, name: str):
+        self.name = name
+        self._subscriptions: dict[Inbox, tuple[str, Any, Any, Any]] = {}  # inbox -> (topic, type, qos, handle)
+        self.rediscoveries = 0
+        self._open()
+
+    def _open(self) -> None:
         import rclpy
         from rclpy.executors import SingleThreadedExecutor
 
-        self.context = context
-        self.node = rclpy.create_node(name, context=context, start_parameter_services=False)
-        self.executor = SingleThreadedExecutor(context=context)
+        self.context = rclpy.Context()
+        rclpy.init(context=self.context)
+        self.node = rclpy.create_node(self.name, context=self.context, start_parameter_services=False)
+        self.executor = SingleThreadedExecutor(context=self.context)
         self.executor.add_node(self.node)
         self._stop = threading.Event()
-        self._thread = threading.Thread(target=self._spin, name=f"spin-{name}", daemon=True)
+        self._thread = threading.Thread(target=self._spin, name=f"spin-{self.name}", daemon=True)
         self._thread.start()
 
     def _spin(self) -> None:
-        while not self._stop.is_set() and self.context.ok():
+        executor, context, stop = self.executor, self.context, self._stop
+        while not stop.is_set() and context.ok():
             try:
-                self.executor.spin_once(timeout_sec=0.05)
+                executor.spin_once(timeout_sec=0.05)
             except Exception:  # noqa: BLE001 - context shutting down
-                if self._stop.is_set() or not self.context.ok():
+                if stop.is_set() or not context.ok():
                     return
                 raise
 
     def close(self) -> None:
+        import rclpy
+
         self._stop.set()
         self._thread.join(timeout=5)
         self.executor.shutdown(timeout_sec=2)
         self.node.destroy_node()
+        rclpy.try_shutdown(context=self.context)
+
+    def _rediscover(self, topic: str) -> None:
+        if self.node.count_publishers(topic) > 0 or not fresh_participant_sees_publishers(topic):
+            return  # not blind: the publisher is absent, or sends nothing this subscription takes
+        self.close()
+        self._open()
+        self.rediscoveries += 1
+        for inbox, (name, msg_type, qos, _old) in list(self._subscriptions.items()):
+            self._subscriptions[inbox] = (name, msg_type, qos, self.node.create_subscription(msg_type, name, inbox._push, qos))
 
     # ---- topics
     def subscribe(self, topic: str, msg_type, qos=None) -> Inbox:
-        inbox = Inbox(topic)
-        self.node.create_subscription(msg_type, topic, inbox._push, qos if qos is not None else reliable_qos())
+        inbox = Inbox(topic, self._rediscover)
+        qos = qos if qos is not None else reliable_qos()
+        self._subscriptions[inbox] = (topic, msg_type, qos, self.node.create_subscription(msg_type, topic, inbox._push, qos))
         return inbox
 
     def one_message(self, topic: str, msg_type, timeout: float, sim: SimNode | None = None, qos=None) -> Any:
         """The next message on `topic`, from a subscription that ends with it (no callbacks after)."""
-        inbox = Inbox(topic)
-        subscription = self.node.create_subscription(msg_type, topic, inbox._push, qos if qos is not None else best_effort_qos())
+        inbox = self.subscribe(topic, msg_type, qos if qos is not None else best_effort_qos())
         try:
             return inbox.next_message(timeout, sim)
         finally:
-            self.node.destroy_subscription(subscription)
+            self.node.destroy_subscription(self._subscriptions.pop(inbox)[3])
 
     def publisher(self, topic: str, msg_type, qos=None, wait_for_subscriber: float | None = 10.0, sim: SimNode | None = None):
         pub = self.node.create_publisher(msg_type, topic, qos if qos is not None else reliable_qos())
@@ -372,6 +427,24 @@ class Probe:
     def wait_for_graph(self, predicate: Callable[[], bool], timeout: float, what: str, node=None) -> None:
         """wait_until for a discovery condition, reporting the probe's view of the graph on timeout."""
         wait_until(predicate, timeout, what, node, explain=self.graph_report)
+
+    def wait_for_publisher(self, topic: str, timeout: float, what: str, node=None) -> None:
+        """wait_for_graph for a publisher of `topic`, starting over on a fresh participant if this
+        one is blind to it (see the class)."""
+        from so101.stack.discovery import REDISCOVER_AFTER_S
+
+        next_look = time.monotonic() + REDISCOVER_AFTER_S
+
+        def found() -> bool:
+            nonlocal next_look
+            if self.node.count_publishers(topic) >= 1:
+                return True
+            if time.monotonic() > next_look:
+                self._rediscover(topic)
+                next_look = time.monotonic() + REDISCOVER_AFTER_S
+            return False
+
+        self.wait_for_graph(found, timeout, what, node)
 
 
 def wait_until(

@@ -131,9 +131,7 @@ def test_a_camera_placed_by_a_file_renders_from_there_with_its_size_and_field_of
     sim = sim_factory("--lockstep", "--seed", "4", "--cameras", "top", "--camera-rate", "100", "--camera-poses", str(poses_file))
     images, infos = subscribe_camera(ros, sim, "top")
     poses = ros.subscribe(sim.name("cube/pose"), PoseStamped, reliable_qos(100))
-    ros.wait_for_graph(
-        lambda: ros.node.count_publishers(sim.name("camera/top/image_raw")) >= 1, 30.0, "the camera publisher", sim
-    )
+    ros.wait_for_publisher(sim.name("camera/top/image_raw"), 30.0, "the camera publisher", sim)
     step(ros, sim, 3)
     wait_until(lambda: images.count() >= 3, 10.0, "frames of the first steps", sim)
     image = images.latest()
@@ -225,9 +223,7 @@ def test_the_cube_is_red_where_its_projected_pose_says_and_reset_moves_it(sim_fa
     )
     cameras = {name: subscribe_camera(ros, sim, name) for name in ("top", "front")}
     poses = ros.subscribe(sim.name("cube/pose"), PoseStamped, reliable_qos(100))
-    ros.wait_for_graph(
-        lambda: ros.node.count_publishers(sim.name("camera/front/image_raw")) >= 1, 30.0, "the camera publishers", sim
-    )
+    ros.wait_for_publisher(sim.name("camera/front/image_raw"), 30.0, "the camera publishers", sim)
 
     def frame_and_pose(name: str):
         """The newest frame of `name`, with the /cube/pose and CameraInfo of the same instant."""
@@ -285,9 +281,7 @@ def test_egl_and_osmesa_render_the_same_frame(sim_factory, ros):
         # A namespace each: the second node's services must not be confused with the first's.
         sim = sim_factory("--lockstep", "--renderer", renderer, "--cameras", "front:160x120@100", "--namespace", renderer)
         images, _ = subscribe_camera(ros, sim, "front")
-        ros.wait_for_graph(
-            lambda: ros.node.count_publishers(sim.name("camera/front/image_raw")) >= 1, 30.0, "the camera publisher", sim
-        )
+        ros.wait_for_publisher(sim.name("camera/front/image_raw"), 30.0, "the camera publisher", sim)
         step(ros, sim, 2)
         wait_until(
             lambda: images.count() >= 1 and stamp_seconds(images.latest().header.stamp) >= 0.02 - 1e-9,
@@ -330,9 +324,7 @@ def test_real_time_is_kept_while_frames_are_skipped_and_counted(sim_factory, ros
 def test_speed_and_lockstep_modes_render_every_frame_at_its_instant(sim_factory, ros, mode):
     sim = sim_factory(*mode, "--cameras", "top:96x72@25")
     images, _ = subscribe_camera(ros, sim, "top", depth=1000)
-    ros.wait_for_graph(
-        lambda: ros.node.count_publishers(sim.name("camera/top/image_raw")) >= 1, 30.0, "the camera publisher", sim
-    )
+    ros.wait_for_publisher(sim.name("camera/top/image_raw"), 30.0, "the camera publisher", sim)
     if "--lockstep" in mode:
         step(ros, sim, 60)
     wait_until(lambda: images.count() >= 15, 30.0, "frames", sim)
@@ -351,9 +343,7 @@ def test_jpeg_frames_decode_to_the_raw_frame(sim_factory, ros):
     sim = sim_factory("--lockstep", "--cameras", "front:160x120", "--jpeg", "--jpeg-quality", "95")
     raw, _ = subscribe_camera(ros, sim, "front")
     compressed = ros.subscribe(sim.name("camera/front/image_raw/compressed"), CompressedImage, reliable_qos(10))
-    ros.wait_for_graph(
-        lambda: ros.node.count_publishers(sim.name("camera/front/image_raw/compressed")) >= 1, 30.0, "the JPEG publisher", sim
-    )
+    ros.wait_for_publisher(sim.name("camera/front/image_raw/compressed"), 30.0, "the JPEG publisher", sim)
     # The frame of the sim's start went out before these subscriptions existed, and a step of
     # 10 ms renders no frame of a 30 Hz camera: step until one is rendered after both subscriptions
     # were matched (each step is answered once its frames are published).

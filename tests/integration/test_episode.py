@@ -111,7 +111,7 @@ def test_lockstep_advances_exactly_one_period_per_step(sim_factory, ros, rate):
         return [stamp_nanoseconds(m.clock) for m in clock.messages()]
 
     # Without steps, sim time stands still (the node may publish its initial time, never a new one).
-    ros.wait_for_graph(lambda: ros.node.count_publishers(sim.name("clock")) >= 1, 20.0, "the /clock publisher", sim)
+    ros.wait_for_publisher(sim.name("clock"), 20.0, "the /clock publisher", sim)
     time.sleep(1.5)
     idle = set(clock_values())
     assert len(idle) <= 1, f"/clock advanced without /sim/step: {sorted(idle)[:10]}"

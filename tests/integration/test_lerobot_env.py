@@ -27,8 +27,6 @@ REPO_ID = "local/so101_env_test"
 @pytest.fixture(scope="module")
 def dataset(tmp_path_factory) -> Path:
     """Two expert episodes (one 64x48 camera), recorded and converted into a LeRobot dataset."""
-    import rclpy
-    from rclpy.context import Context
 
     tmp = tmp_path_factory.mktemp("lerobot_env")
     bags = tmp / "bags"
@@ -39,9 +37,7 @@ def dataset(tmp_path_factory) -> Path:
         tmp / "sim.log",
     )
     nodes = [sim]
-    context = Context()
-    rclpy.init(context=context)
-    probe = Probe(context, "so101_env_test_probe")
+    probe = Probe("so101_env_test_probe")
     try:
         nodes.append(SimNode(node_binary("recorder_node"), ["--output", str(bags)], tmp / "recorder.log"))
         probe.wait_for_graph(lambda: probe.node.count_subscribers("/episode/events") >= 1, 20.0, "the recorder", sim)
@@ -55,7 +51,6 @@ def dataset(tmp_path_factory) -> Path:
         )
     finally:
         probe.close()
-        rclpy.try_shutdown(context=context)
         problems = stop_nodes(nodes)
     assert not problems, problems
     output = tmp / "dataset"

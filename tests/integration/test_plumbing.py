@@ -123,3 +123,26 @@ def test_help_lists_every_flag():
         "--namespace",
     ):
         assert flag in done.stdout, flag
+
+
+def test_a_probe_blind_to_a_publisher_starts_over_on_a_fresh_participant(sim_factory, monkeypatch):
+    """The probe's remedy for Fast DDS missing a starting node's publications (so101.stack.discovery).
+    The blindness is made here: the probe's first participant opens in another domain. Its
+    subscription gets nothing, a witness in the node's domain sees the publisher, and the probe
+    starts over there with the same Inbox."""
+    import os
+
+    from harness import Probe
+    from sensor_msgs.msg import JointState
+
+    sim = sim_factory()
+    node_domain = os.environ.get("ROS_DOMAIN_ID", "0")
+    monkeypatch.setenv("ROS_DOMAIN_ID", str((int(node_domain) + 1) % 100))
+    probe = Probe("so101_blind_probe")
+    try:
+        monkeypatch.setenv("ROS_DOMAIN_ID", node_domain)
+        states = probe.subscribe("/joint_states", JointState, best_effort_qos())
+        states.wait_count(5, 20.0, sim)
+        assert probe.rediscoveries == 1
+    finally:
+        probe.close()

@@ -83,9 +83,7 @@ def test_robot_description_and_tf_match_the_scene(sim_factory, recorder_factory,
     recorder = recorder_factory("--topics", "tf,joint_states", "--start")
     state_publisher = SimNode(node_binary("so101_state_publisher"), [], tmp_path / "state_publisher.log")
     try:
-        ros.wait_for_graph(
-            lambda: ros.node.count_publishers("/robot_description") >= 1, 20.0, "/robot_description", state_publisher
-        )
+        ros.wait_for_publisher("/robot_description", 20.0, "/robot_description", state_publisher)
         time.sleep(1.0)
         # Subscribed after it was published: transient local hands it over all the same.
         description = ros.subscribe("/robot_description", String, latched_qos())
@@ -101,7 +99,7 @@ def test_robot_description_and_tf_match_the_scene(sim_factory, recorder_factory,
             assert abs(float(limit.get("upper")) - JOINT_LIMITS[name][1]) < 1e-3, name
         assert {link.get("name") for link in robot.iter("link")} >= {"base", *LINKS, "grasp_point"}
         # /tf_static is offered latched, as tf2's static broadcaster does (RViz relies on it).
-        ros.wait_for_graph(lambda: ros.node.count_publishers("/tf_static") >= 1, 20.0, "/tf_static", state_publisher)
+        ros.wait_for_publisher("/tf_static", 20.0, "/tf_static", state_publisher)
         (static_info,) = ros.node.get_publishers_info_by_topic("/tf_static")
         assert static_info.topic_type == "tf2_msgs/msg/TFMessage"
         assert static_info.qos_profile.durability == DurabilityPolicy.TRANSIENT_LOCAL
@@ -214,7 +212,7 @@ def test_an_episode_bag_becomes_an_rrd_with_every_joint_state(sim_factory, recor
     sim = sim_factory("--cameras", "top:64x48", "--demo")
     # Small chunks: the damaged copy below, cut in half, still holds whole chunks.
     recorder = recorder_factory("--start", "--chunk-size", "32768")
-    ros.wait_for_graph(lambda: ros.node.count_publishers("/joint_states") >= 1, 20.0, "the sim", sim)
+    ros.wait_for_publisher("/joint_states", 20.0, "the sim", sim)
     time.sleep(3.0)
     assert recorder.stop() == 0, recorder.log_tail()
     episode = next(recorder.output.glob("episode_*"))
