@@ -50,7 +50,8 @@ os.environ.setdefault("FASTRTPS_DEFAULT_PROFILES_FILE", str(REPO_ROOT / "python"
 # One DDS domain per pytest-xdist worker ("gw0", "gw1", ...), inherited by every node and rclpy
 # process the worker starts: the workers share one network namespace and /dev/shm, and a domain
 # of its own gives each worker its own discovery and data ports (UDP and Fast DDS shared memory).
-# Domains from 20 up: test_plumbing uses 7 and listens on 0.
+# Domains from 20 up: test_plumbing uses 7 and listens on 0; harness.blind_domain() is the
+# worker's + 40.
 XDIST_DOMAIN_BASE = 20
 _worker = os.environ.get("PYTEST_XDIST_WORKER", "")
 if _worker.startswith("gw"):

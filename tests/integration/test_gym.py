@@ -6,6 +6,7 @@ joint or end-effector actions."""
 from __future__ import annotations
 
 import numpy as np
+from harness import blind_domain
 
 
 def state_of(observation) -> np.ndarray:
@@ -88,7 +89,7 @@ def test_a_participant_blind_to_the_node_is_replaced(monkeypatch, caplog):
     import gymnasium as gym
 
     node_domain = os.environ.get("ROS_DOMAIN_ID", "0")
-    monkeypatch.setenv("ROS_DOMAIN_ID", str((int(node_domain) + 1) % 100))
+    monkeypatch.setenv("ROS_DOMAIN_ID", blind_domain())
     ros = gym.make("so101:so101/CubeToBin-v0", backend="ros")
     local = gym.make("so101/CubeToBin-v0")
     monkeypatch.setenv("ROS_DOMAIN_ID", node_domain)

@@ -16,7 +16,7 @@ from pathlib import Path
 
 import yaml
 from driver_harness import write_calibration
-from harness import best_effort_qos, wait_for_launcher
+from harness import best_effort_qos, blind_domain, wait_for_launcher
 
 LAUNCH = Path(sys.executable).parent / "so101-launch"
 
@@ -210,7 +210,7 @@ def test_the_launcher_replaces_a_graph_participant_blind_to_a_node(tmp_path, mon
 
     launch = Launch(tmp_path, ready_timeout=20.0, stop_timeout=10.0, namespace="")
     node_domain = os.environ.get("ROS_DOMAIN_ID", "0")
-    monkeypatch.setenv("ROS_DOMAIN_ID", str((int(node_domain) + 1) % 100))
+    monkeypatch.setenv("ROS_DOMAIN_ID", blind_domain())
     launch.graph_node()
     monkeypatch.setenv("ROS_DOMAIN_ID", node_domain)
     try:

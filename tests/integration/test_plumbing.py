@@ -7,7 +7,7 @@ import subprocess
 import time
 
 import pytest
-from harness import best_effort_qos, node_binary, node_environment, reliable_qos, start_and_wait
+from harness import Probe, best_effort_qos, blind_domain, node_binary, node_environment, reliable_qos, start_and_wait
 
 
 def joint_states_seen(domain_id: int, seconds: float) -> int:
@@ -132,12 +132,11 @@ def test_a_probe_blind_to_a_publisher_starts_over_on_a_fresh_participant(sim_fac
     starts over there with the same Inbox."""
     import os
 
-    from harness import Probe
     from sensor_msgs.msg import JointState
 
     sim = sim_factory()
     node_domain = os.environ.get("ROS_DOMAIN_ID", "0")
-    monkeypatch.setenv("ROS_DOMAIN_ID", str((int(node_domain) + 1) % 100))
+    monkeypatch.setenv("ROS_DOMAIN_ID", blind_domain())
     probe = Probe("so101_blind_probe")
     try:
         monkeypatch.setenv("ROS_DOMAIN_ID", node_domain)

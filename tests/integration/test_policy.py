@@ -17,7 +17,7 @@ import threading
 from pathlib import Path
 
 import numpy as np
-from harness import TINY_ACT, SimNode, best_effort_qos, node_binary, reliable_qos, wait_until
+from harness import TINY_ACT, SimNode, best_effort_qos, blind_domain, node_binary, reliable_qos, wait_until
 
 JOINTS = ["shoulder_pan", "shoulder_lift", "elbow_flex", "wrist_flex", "wrist_roll", "gripper"]
 LIMITS = [(-1.9199, 1.9199), (-1.7453, 1.7453), (-1.69, 1.69), (-1.6581, 1.6581), (-2.7438, 2.8412), (-0.1745, 1.7453)]
@@ -251,7 +251,7 @@ def test_the_runner_replaces_a_participant_blind_to_the_arm_s_node(sim_factory, 
 
     sim = sim_factory("--cameras", "top:64x48", "--namespace", "blind")
     node_domain = os.environ.get("ROS_DOMAIN_ID", "0")
-    monkeypatch.setenv("ROS_DOMAIN_ID", str((int(node_domain) + 1) % 100))
+    monkeypatch.setenv("ROS_DOMAIN_ID", blind_domain())
     live = LiveNode("/blind", {"top": "/blind/camera/top/image_raw"}, cube_pose=True)
     monkeypatch.setenv("ROS_DOMAIN_ID", node_domain)
     try:

@@ -139,8 +139,7 @@ class SO101ROS(Robot):
                     f"({publishers_seen(self._node, missing)}, by the last of {participants} DDS participant(s); "
                     "is so101_sim_node or so101_feetech_driver running in this namespace and ROS domain?)"
                 )
-            unseen = without_publishers(self._node, missing)
-            if unseen and now - opened > REDISCOVER_AFTER_S:
+            if now - opened > REDISCOVER_AFTER_S and (unseen := without_publishers(self._node, missing)):
                 # The node may be absent, or this participant's discovery missed it (so101.stack.discovery).
                 log.warning(
                     "so101_ros: no publisher of %s discovered in %.0f s: starting a fresh DDS participant",
