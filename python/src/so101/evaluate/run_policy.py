@@ -180,14 +180,8 @@ def run_live(args, policy: StackPolicy) -> int:
     clock: PeriodClock | None = None
     inference: list[float] = []
     try:
-        if args.reset:
-            client = live.node.create_client(Trigger, f"{prefix}/{contract.SIM_RESET}")
-            if not spin_until(live.node, client.service_is_ready, 20.0):
-                raise SystemExit(f"so101-run-policy: no {prefix}/sim/reset service within 20 s")
-            future = client.call_async(Trigger.Request())
-            if not spin_until(live.node, future.done, 10.0) or not future.result().success:
-                raise SystemExit(f"so101-run-policy: {prefix}/sim/reset did not succeed")
-        deadline = time.monotonic() + args.startup_timeout
+        waiting_since = time.monotonic()
+        # The inputs first: a participant that hears them has discovered the arm's node.
         if not live.wait_for_inputs(camera_names, args.max_age, args.startup_timeout):
             missing = live.inputs.stale(camera_names, args.max_age)
             raise SystemExit(
@@ -195,8 +189,15 @@ def run_live(args, policy: StackPolicy) -> int:
                 "(is the arm's node running, with these cameras?)"
             )
         node, inputs, commands = live.node, live.inputs, live.commands
+        remaining = max(0.0, args.startup_timeout - (time.monotonic() - waiting_since))  # the reset's time aside
+        if args.reset:
+            client = node.create_client(Trigger, f"{prefix}/{contract.SIM_RESET}")
+            if not spin_until(node, client.service_is_ready, 20.0):
+                raise SystemExit(f"so101-run-policy: no {prefix}/sim/reset service within 20 s")
+            future = client.call_async(Trigger.Request())
+            if not spin_until(node, future.done, 10.0) or not future.result().success:
+                raise SystemExit(f"so101-run-policy: {prefix}/sim/reset did not succeed")
         # The arm's node must hear the first command: wait until it has matched the publisher.
-        remaining = max(0.0, deadline - time.monotonic())
         if not spin_until(node, lambda: commands.get_subscription_count() > 0, remaining):
             raise SystemExit(
                 f"so101-run-policy: no subscriber of {prefix}/joint_commands within "
