@@ -13,6 +13,13 @@ def state_of(observation) -> np.ndarray:
     return np.concatenate([observation["agent_pos"], observation["agent_vel"], observation["environment_state"]])
 
 
+def assert_a_step_alike(ros, local, action) -> None:
+    """One step of both backends with `action`: the same state, to 1e-9."""
+    ros_observation, *_ = ros.step(action)
+    local_observation, *_ = local.step(action)
+    assert np.abs(state_of(ros_observation) - state_of(local_observation)).max() <= 1e-9
+
+
 def test_the_ros_backend_passes_the_checker_and_follows_the_in_process_trajectory():
     import gymnasium as gym
     from gymnasium.utils.env_checker import check_env
@@ -72,9 +79,7 @@ def test_a_lost_reply_to_the_first_reset_restarts_the_node_with_the_same_seed():
         local_observation, _ = local.reset(seed=5)
         assert dropped == ["/sim/reset"]
         assert np.abs(state_of(ros_observation) - state_of(local_observation)).max() <= 1e-9
-        ros_observation, *_ = ros.step(local_observation["agent_pos"])
-        local_observation, *_ = local.step(local_observation["agent_pos"])
-        assert np.abs(state_of(ros_observation) - state_of(local_observation)).max() <= 1e-9
+        assert_a_step_alike(ros, local, local_observation["agent_pos"])
     finally:
         ros.close()
         local.close()
@@ -97,9 +102,7 @@ def test_a_participant_blind_to_the_node_is_replaced(monkeypatch, caplog):
         ros_observation, _ = ros.reset(seed=3)
         local_observation, _ = local.reset(seed=3)
         assert "starting a fresh DDS participant" in caplog.text
-        ros_observation, *_ = ros.step(local_observation["agent_pos"])
-        local_observation, *_ = local.step(local_observation["agent_pos"])
-        assert np.abs(state_of(ros_observation) - state_of(local_observation)).max() <= 1e-9
+        assert_a_step_alike(ros, local, local_observation["agent_pos"])
     finally:
         ros.close()
         local.close()

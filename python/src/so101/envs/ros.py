@@ -150,11 +150,9 @@ class So101RosEnv(gym.Env):
         """Replaces the DDS participant when, REDISCOVER_AFTER_S after it opened or the node
         started, it has discovered no publisher of the node's /joint_states (so101.stack.discovery);
         True if it did."""
-        from ..stack.discovery import REDISCOVER_AFTER_S, without_publishers
+        from ..stack.discovery import blind_to
 
-        if time.monotonic() - self._looking_since < REDISCOVER_AFTER_S:
-            return False
-        if not without_publishers(self._node, [f"/{self._namespace}/{contract.JOINT_STATES}"]):
+        if not blind_to(self._node, [f"/{self._namespace}/{contract.JOINT_STATES}"], self._looking_since):
             return False
         log.warning("no publisher of /%s/%s discovered: starting a fresh DDS participant", self._namespace, contract.JOINT_STATES)
         self._close_ros()

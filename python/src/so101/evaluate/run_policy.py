@@ -117,7 +117,7 @@ class LiveInputs:
 
 class LiveNode:
     """The runner's rclpy node with its inputs and command publisher, on a DDS participant that
-    reopen() replaces (so101.stack.discovery)."""
+    wait_for_inputs() replaces when it is blind to the arm's node (so101.stack.discovery)."""
 
     def __init__(self, prefix: str, cameras: dict[str, str], cube_pose: bool):
         self._prefix, self._cameras, self._cube_pose = prefix, cameras, cube_pose
@@ -144,15 +144,13 @@ class LiveNode:
         that has discovered no publisher of a missing input after REDISCOVER_AFTER_S is replaced."""
         import rclpy
 
-        from ..stack.discovery import REDISCOVER_AFTER_S, without_publishers
+        from ..stack.discovery import REDISCOVER_AFTER_S, blind_to
 
         deadline = time.monotonic() + timeout
         while missing := self.inputs.stale(cameras, max_age):
             if time.monotonic() > deadline:
                 return False
-            if time.monotonic() - self.opened > REDISCOVER_AFTER_S and (
-                unseen := without_publishers(self.node, [self.inputs.topics[what] for what in missing])
-            ):
+            if unseen := blind_to(self.node, [self.inputs.topics[what] for what in missing], self.opened):
                 log.warning(
                     "no publisher of %s discovered in %.0f s: starting a fresh DDS participant",
                     ", ".join(unseen),

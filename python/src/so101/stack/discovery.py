@@ -11,6 +11,8 @@ they need still has no publisher after `REDISCOVER_AFTER_S`.
 
 from __future__ import annotations
 
+import time
+
 # Discovery on one machine completes within about a second even on a loaded 2-core host; three
 # seconds without a single publisher means the node is absent or was missed.
 REDISCOVER_AFTER_S = 3.0
@@ -19,6 +21,14 @@ REDISCOVER_AFTER_S = 3.0
 def without_publishers(node, topics: list[str]) -> list[str]:
     """The topics (absolute names) for which `node`'s participant has discovered no publisher."""
     return [topic for topic in topics if node.count_publishers(topic) == 0]
+
+
+def blind_to(node, topics: list[str], looking_since: float) -> list[str]:
+    """The topics without a discovered publisher once REDISCOVER_AFTER_S have passed since
+    `looking_since` (time.monotonic: the participant opened, or the node started); none before."""
+    if time.monotonic() - looking_since < REDISCOVER_AFTER_S:
+        return []
+    return without_publishers(node, topics)
 
 
 def publishers_seen(node, topics: list[str]) -> str:

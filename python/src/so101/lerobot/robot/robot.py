@@ -127,7 +127,7 @@ class SO101ROS(Robot):
         return missing
 
     def _wait_for_inputs(self) -> None:
-        from ...stack.discovery import REDISCOVER_AFTER_S, publishers_seen, without_publishers
+        from ...stack.discovery import REDISCOVER_AFTER_S, blind_to, publishers_seen
 
         deadline = time.monotonic() + self.config.connect_timeout_s
         opened, participants = time.monotonic(), 1
@@ -139,7 +139,7 @@ class SO101ROS(Robot):
                     f"({publishers_seen(self._node, missing)}, by the last of {participants} DDS participant(s); "
                     "is so101_sim_node or so101_feetech_driver running in this namespace and ROS domain?)"
                 )
-            if now - opened > REDISCOVER_AFTER_S and (unseen := without_publishers(self._node, missing)):
+            if unseen := blind_to(self._node, missing, opened):
                 # The node may be absent, or this participant's discovery missed it (so101.stack.discovery).
                 log.warning(
                     "so101_ros: no publisher of %s discovered in %.0f s: starting a fresh DDS participant",
