@@ -4,6 +4,7 @@ and converter calls, lerobot-train with each preset, and the evaluation through 
 from __future__ import annotations
 
 import argparse
+import json
 from pathlib import Path
 
 import pytest
@@ -198,3 +199,49 @@ def test_demos_record_in_parallel_only_in_process(tmp_path):
     args = parse("demos", "--workers", "2", "--output", str(tmp_path))
     with pytest.raises(SystemExit, match="--backend inprocess"):
         demos.run(args)
+
+
+def interrupted_run(tmp_path: Path, policy_type: str = "act") -> Path:
+    """An output directory as lerobot-train leaves it after its checkpoint of step 200 (its
+    checkpoints/last link and train_config.json; no weights, no process is started)."""
+    output = tmp_path / "run"
+    checkpoint = output / "checkpoints" / "000200"
+    (checkpoint / "pretrained_model").mkdir(parents=True)
+    (output / "checkpoints" / "last").symlink_to("000200")
+    config = {"policy": {"type": policy_type}, "dataset": {"root": str(tmp_path / "data")}, "steps": 4000, "batch_size": 32}
+    (checkpoint / "pretrained_model" / "train_config.json").write_text(json.dumps(config))
+    return output
+
+
+def test_a_resumed_run_continues_its_checkpoint_with_its_own_settings(tmp_path):
+    output = interrupted_run(tmp_path)
+    args = parse("act", "--resume", str(output), "--loader-workers", "0", "--policy-arg=--log_freq=10")
+    run_dir, config_file = lerobot_train.resume_settings(args)
+    assert run_dir == output.resolve() and lerobot_train.checkpoint_step(run_dir) == 200
+    # The dataset and length the evaluation and summary use are the checkpoint's.
+    assert (args.dataset, args.steps, args.batch_size) == (str(tmp_path / "data"), 4000, 32)
+    command = lerobot_train.resume_command(args, config_file, run_dir)
+    assert Path(command[0]).name == "lerobot-train"
+    assert command[1:] == [
+        f"--config_path={config_file}",
+        "--resume=true",
+        f"--output_dir={run_dir}",
+        "--steps=4000",
+        "--num_workers=0",
+        "--log_freq=10",
+    ]
+    longer = parse("act", "--resume", str(output), "--steps", "5000")
+    lerobot_train.resume_settings(longer)
+    assert longer.steps == 5000
+
+
+def test_resume_refuses_what_it_cannot_continue(tmp_path):
+    output = interrupted_run(tmp_path)
+    with pytest.raises(SystemExit, match="leave out --dataset"):
+        lerobot_train.resume_settings(parse("act", "--resume", str(output), "--dataset", str(tmp_path)))
+    with pytest.raises(SystemExit, match="resume it with so101-learn act"):
+        lerobot_train.resume_settings(parse("diffusion", "--resume", str(output)))
+    with pytest.raises(SystemExit, match="no checkpoint to resume from"):
+        lerobot_train.resume_settings(parse("act", "--resume", str(tmp_path / "started-just-now")))
+    with pytest.raises(SystemExit, match="--dataset is required"):
+        lerobot_train.run(parse("act"))

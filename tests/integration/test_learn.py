@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import json
 import os
+import shutil
 import subprocess
 import sys
 from pathlib import Path
@@ -101,6 +102,35 @@ def test_two_processes_train_one_policy_through_accelerate_on_the_cpu(demos, tmp
     checkpoint = output / "checkpoints" / "last" / "pretrained_model"
     assert json.loads((checkpoint / "config.json").read_text())["dim_model"] == 32
     assert (checkpoint / "model.safetensors").is_file()
+
+
+def test_an_interrupted_training_resumes_to_the_weights_of_an_uninterrupted_one(demos, tmp_path):
+    """A run stopped between checkpoints (its last checkpoint is step 2 of 4) continues with
+    --resume from that checkpoint (weights, optimizer, learning-rate schedule, data order) to the
+    very weights the run reached without a stop."""
+    from safetensors.torch import load_file
+
+    output = tmp_path / "act"
+    tiny = ["--policy.dim_model=32", "--policy.n_heads=2", "--policy.dim_feedforward=64", "--policy.n_encoder_layers=1"]
+    argv = ["act", "--dataset", str(demos), "--steps", "4", "--batch-size", "4", "--save-every", "2", "--eval", "0"]
+    learn(*argv, "--output", str(output), *[f"--policy-arg={arg}" for arg in tiny], timeout=300)
+    checkpoints = output / "checkpoints"
+    uninterrupted = load_file(checkpoints / "000004" / "pretrained_model" / "model.safetensors")
+    # What a kill between the checkpoints of steps 2 and 4 leaves.
+    shutil.rmtree(checkpoints / "000004")
+    (checkpoints / "last").unlink()
+    (checkpoints / "last").symlink_to("000002")
+
+    done = learn("act", "--resume", str(output), "--eval", "0", timeout=300)
+    assert "trained 4 steps (batch 4)" in done.stdout and "resumed from step 2" in done.stdout, done.stdout[-2000:]
+    assert os.readlink(checkpoints / "last") == "000004"
+    resumed = load_file(checkpoints / "000004" / "pretrained_model" / "model.safetensors")
+    assert resumed.keys() == uninterrupted.keys()
+    differing = [name for name in resumed if not resumed[name].equal(uninterrupted[name])]
+    assert not differing, differing
+    # The checkpoint of step 2 is not where it ended: training went on from it.
+    halfway = load_file(checkpoints / "000002" / "pretrained_model" / "model.safetensors")
+    assert any(not halfway[name].equal(resumed[name]) for name in resumed)
 
 
 def assert_actions_within_the_samplers_clip_range(checkpoint: Path, config: dict, dataset: Path) -> None:

@@ -154,7 +154,7 @@ def summary(name: str) -> str:
 def add_arguments(p: argparse.ArgumentParser, name: str) -> None:
     """The options of the recipe `name` (act or diffusion: PRESETS' keys)."""
     preset = PRESETS[name]
-    p.add_argument("--dataset", required=True, help="a LeRobot dataset directory (so101-learn demos, so101-bag-to-lerobot)")
+    p.add_argument("--dataset", help="a LeRobot dataset directory (so101-learn demos, so101-bag-to-lerobot)")
     vision = VISION_LENGTH.get(name)
     with_cameras = f"; {vision['steps']:,} with cameras" if vision else ""
     p.add_argument("--steps", type=int, default=None, help=f"training steps (default {preset['steps']:,}{with_cameras})")
@@ -185,6 +185,14 @@ def add_arguments(p: argparse.ArgumentParser, name: str) -> None:
     )
     p.add_argument("--policy-arg", action="append", default=[], help="one more lerobot-train argument (repeatable)")
     p.add_argument("--output", default=None, help=f"lerobot-train's output directory (default outputs/{name}-<time>/)")
+    p.add_argument(
+        "--resume",
+        metavar="OUTPUT",
+        default=None,
+        help="continue the interrupted run in OUTPUT from its last checkpoint (LeRobot's resume: weights, optimizer, "
+        "learning-rate schedule, data order) instead of starting one; its settings and dataset are the checkpoint's "
+        "(--steps may lengthen it), then the evaluation as asked",
+    )
     p.add_argument("--eval", type=int, default=20, metavar="M", help="then evaluate over M seeded episodes (0: no evaluation)")
     p.add_argument("--eval-seed", type=int, default=1000, help="seed of the first evaluation episode (demos start at 0)")
     p.add_argument(
@@ -329,26 +337,88 @@ def eval_command(args, checkpoint: Path, eval_dir: Path) -> list[str]:
     )
 
 
+def last_train_config(output: Path) -> Path:
+    """The train_config.json of the run's last checkpoint (LeRobot points checkpoints/last at a
+    checkpoint once it is written whole)."""
+    return output / "checkpoints" / "last" / "pretrained_model" / "train_config.json"
+
+
+def resume_settings(args) -> tuple[Path, Path]:
+    """For --resume: the run's output directory and its last checkpoint's train_config.json; the
+    dataset, steps and batch size in args become the checkpoint's (--steps, when given, wins)."""
+    name = f"so101-learn {args.policy_type}"
+    if args.dataset or args.output or args.batch_size:
+        raise SystemExit(
+            f"{name}: --resume takes the dataset, output and batch size from the run: leave out --dataset, --output and --batch-size"
+        )
+    output = Path(args.resume).resolve()
+    config_file = last_train_config(output)
+    if not config_file.is_file():
+        raise SystemExit(
+            f"{name}: {output} has no checkpoint to resume from ({config_file.relative_to(output)} is missing): "
+            "a run writes its first one after --save-every steps"
+        )
+    config = json.loads(config_file.read_text())
+    if config["policy"]["type"] != args.policy_type:
+        raise SystemExit(
+            f"{name}: {output} trained a {config['policy']['type']} policy: resume it with so101-learn {config['policy']['type']}"
+        )
+    args.dataset = config["dataset"]["root"]
+    args.steps = config["steps"] if args.steps is None else args.steps
+    args.batch_size = config["batch_size"]
+    return output, config_file
+
+
+def resume_command(args, config_file: Path, output: Path) -> list[str]:
+    """lerobot-train resuming the checkpoint of `config_file` into the run's own directory, with
+    the run settings given again (steps, loaders, processes, --policy-arg)."""
+    command = [
+        str(Path(sys.executable).with_name("lerobot-train")),
+        f"--config_path={config_file}",
+        "--resume=true",
+        f"--output_dir={output}",
+        f"--steps={args.steps}",
+    ]
+    if args.loader_workers is not None:
+        command.append(f"--num_workers={args.loader_workers}")
+    command += args.policy_arg
+    return launcher(args) + command[1:] if args.num_processes > 1 else command
+
+
+def checkpoint_step(output: Path) -> int:
+    """The step of the run's last checkpoint (its directory's name, e.g. 000200); 0 when none."""
+    last = output / "checkpoints" / "last"
+    return int(last.resolve().name) if last.exists() else 0
+
+
 def run(args) -> int:
-    resolve_length(args)
+    name = f"so101-learn {args.policy_type}"
+    if args.resume:
+        output, config_file = resume_settings(args)
+        resumed_from = checkpoint_step(output)
+    else:
+        resumed_from = 0
+        if not args.dataset:
+            raise SystemExit(f"{name}: --dataset is required (or --resume OUTPUT to continue a run)")
+        if not (Path(args.dataset) / "meta" / "info.json").is_file():
+            raise SystemExit(f"{name}: {args.dataset} is not a LeRobot dataset (no meta/info.json)")
+        resolve_length(args)
+        output = Path(args.output or repo_root() / "outputs" / f"{args.policy_type}-{time.strftime('%Y%m%d-%H%M%S')}").resolve()
+        if output.exists():
+            raise SystemExit(f"{name}: {output} exists already (lerobot-train starts a new run there; --resume continues it)")
     if args.steps <= 0 or args.batch_size <= 0:
-        raise SystemExit(f"so101-learn {args.policy_type}: --steps and --batch-size must be positive")
+        raise SystemExit(f"{name}: --steps and --batch-size must be positive")
     if args.num_processes <= 0 or (args.loader_workers is not None and args.loader_workers < 0):
-        raise SystemExit(f"so101-learn {args.policy_type}: --num-processes must be positive, --loader-workers not negative")
-    if not (Path(args.dataset) / "meta" / "info.json").is_file():
-        raise SystemExit(f"so101-learn {args.policy_type}: {args.dataset} is not a LeRobot dataset (no meta/info.json)")
-    output = Path(args.output or repo_root() / "outputs" / f"{args.policy_type}-{time.strftime('%Y%m%d-%H%M%S')}")
-    if output.exists():
-        raise SystemExit(f"so101-learn {args.policy_type}: {output} exists already (lerobot-train starts a new run there)")
+        raise SystemExit(f"{name}: --num-processes must be positive, --loader-workers not negative")
 
     environment = dict(os.environ)
     if args.torch_threads:
         environment["OMP_NUM_THREADS"] = str(args.torch_threads)
-    command = train_command(args, output)
+    command = resume_command(args, config_file, output) if args.resume else train_command(args, output)
     print("==> " + " ".join(command), flush=True)
     started = time.monotonic()
     if subprocess.run(command, env=environment).returncode != 0:
-        raise SystemExit(f"so101-learn {args.policy_type}: lerobot-train failed")
+        raise SystemExit(f"{name}: lerobot-train failed")
     train_s = time.monotonic() - started
     checkpoint = output / "checkpoints" / "last" / "pretrained_model"
 
@@ -361,8 +431,10 @@ def run(args) -> int:
             raise SystemExit(f"so101-learn {args.policy_type}: so101-run-policy --eval failed")
         result = json.loads((eval_dir / "eval_info.json").read_text())["aggregated"]
 
+    resumed = f", resumed from step {resumed_from}" if args.resume else ""  # the steps of this command: the difference
     print(
-        f"\nSummary: {args.policy_type} trained {args.steps} steps (batch {args.batch_size}) in {train_s / 60:.1f} min on {args.device}"
+        f"\nSummary: {args.policy_type} trained {args.steps} steps (batch {args.batch_size}) in {train_s / 60:.1f} min on "
+        f"{args.device}{resumed}"
     )
     print(f"  policy:  {checkpoint}")
     if result:
