@@ -16,6 +16,7 @@ from . import (
     ee,
     expert,
     latency,
+    model_step,
     recorder,
     servo_model,
     sim,
@@ -44,6 +45,7 @@ BENCHMARKS = {
         servo_model,
         sysid,
         train_step,
+        model_step,
     )
 }
 
