@@ -177,3 +177,34 @@ def test_the_task_is_scored_played_and_recorded_alike(binaries, task, sim_task, 
 def test_a_policy_is_told_the_task(binaries):
     runner = argv_of(["--control", "policy", "--policy", "some/policy", "--task", "lift_cube"])["so101-run-policy"]
     assert runner[runner.index("--task") + 1] == "lift the cube" and runner[runner.index("--sim-task") + 1] == "lift_cube"
+
+
+def closed_episode(bags, name: str, custom: dict | None, text: str | None = None) -> None:
+    """An episode directory as recorder_node closes it: an MCAP file and metadata.yaml (or `text`
+    in its place, e.g. a file half written)."""
+    import yaml
+
+    episode = bags / name
+    episode.mkdir(parents=True)
+    (episode / f"{name}_0.mcap").write_bytes(b"")
+    info = {"relative_file_paths": [f"{name}_0.mcap"], "custom_data": custom}
+    (episode / "metadata.yaml").write_text(text if text is not None else yaml.safe_dump({"rosbag2_bagfile_information": info}))
+
+
+def test_the_launcher_reports_each_closed_episode_once_with_the_verdict_the_converter_reads(tmp_path, capsys):
+    from so101.dataset.bags import episode_verdict
+
+    closed_episode(tmp_path, "episode_0001", {"success": "true", "task": "cube_to_bin"})
+    closed_episode(tmp_path, "episode_0002", {"success": "false"})
+    closed_episode(tmp_path, "episode_0003", None)
+    closed_episode(tmp_path, "episode_0004", None, text="rosbag2_bagfile_information: {relative_file_paths: [")
+    reported: set = set()
+    launch.report_closed_episodes(tmp_path, reported)
+    launch.report_closed_episodes(tmp_path, reported)
+    assert capsys.readouterr().out.splitlines() == [
+        "so101-launch: recorded episode_0001 (success)",
+        "so101-launch: recorded episode_0002 (failure)",
+        "so101-launch: recorded episode_0003 (no verdict)",
+        "so101-launch: recorded episode_0004 (no verdict)",
+    ]
+    assert [episode_verdict(tmp_path / f"episode_000{n}") for n in (1, 2, 3)] == [True, False, None]

@@ -233,14 +233,24 @@ def read_episode(path: Path, cameras: list[str] | None) -> Episode:
             f"{', '.join(file.name for file in files)}; its task and verdict are unknown"
         )
     episode = _read_files(path, files, cameras, report)
-    success_text = str(custom.get(contract.CUSTOM_SUCCESS, "")).lower()
     return replace(
         episode,
         task=str(custom.get(contract.CUSTOM_TASK) or ""),
-        success={"true": True, "false": False}.get(success_text),
+        success=success_of(custom),
         seed=str(custom.get(contract.CUSTOM_SEED, "")),
         simulation=simulation_settings(path, custom),
     )
+
+
+def success_of(custom: dict) -> bool | None:
+    """An episode's verdict from its metadata's custom_data; None when it holds none."""
+    return {"true": True, "false": False}.get(str(custom.get(contract.CUSTOM_SUCCESS, "")).lower())
+
+
+def episode_verdict(path: Path) -> bool | None:
+    """The verdict a closed episode's metadata.yaml records (None when it holds none). Raises
+    BagError for a missing, unreadable or malformed file."""
+    return success_of(_metadata(path, path / contract.EPISODE_METADATA_FILE)[0])
 
 
 def _metadata(path: Path, metadata_file: Path) -> tuple[dict, list[Path]]:

@@ -200,17 +200,17 @@ class Launch:
 
 def report_closed_episodes(bags: Path, reported: set[Path]) -> None:
     """Prints the episodes newly closed in `bags` (metadata.yaml written), with their verdict."""
-    import yaml
+    from ..dataset.bags import BagError, episode_verdict
 
     for metadata in sorted(bags.glob(f"{contract.EPISODE_DEFAULT_PREFIX}_*/{contract.EPISODE_METADATA_FILE}")):
         if metadata in reported:
             continue
         reported.add(metadata)
         try:
-            custom = yaml.safe_load(metadata.read_text())["rosbag2_bagfile_information"].get("custom_data") or {}
-        except Exception:  # noqa: BLE001 - a file being written is reported without its verdict
-            custom = {}
-        verdict = {"true": "success", "false": "failure"}.get(str(custom.get(contract.CUSTOM_SUCCESS, "")).lower(), "no verdict")
+            success = episode_verdict(metadata.parent)
+        except BagError:  # a file being written is reported without its verdict
+            success = None
+        verdict = {True: "success", False: "failure", None: "no verdict"}[success]
         print(f"so101-launch: recorded {metadata.parent.name} ({verdict})", flush=True)
 
 
