@@ -181,7 +181,7 @@ def test_a_policy_is_told_the_task(binaries):
 
 def closed_episode(bags, name: str, custom: dict | None, text: str | None = None) -> None:
     """An episode directory as recorder_node closes it: an MCAP file and metadata.yaml (or `text`
-    in its place, e.g. a file half written)."""
+    in its place, e.g. a damaged file)."""
     import yaml
 
     episode = bags / name
@@ -201,10 +201,13 @@ def test_the_launcher_reports_each_closed_episode_once_with_the_verdict_the_conv
     reported: set = set()
     launch.report_closed_episodes(tmp_path, reported)
     launch.report_closed_episodes(tmp_path, reported)
-    assert capsys.readouterr().out.splitlines() == [
+    lines = capsys.readouterr().out.splitlines()
+    assert lines[:3] == [
         "so101-launch: recorded episode_0001 (success)",
         "so101-launch: recorded episode_0002 (failure)",
         "so101-launch: recorded episode_0003 (no verdict)",
-        "so101-launch: recorded episode_0004 (no verdict)",
     ]
+    # A damaged file is named with the converter's reason, before a conversion meets it.
+    assert len(lines) == 4, lines
+    assert lines[3].startswith("so101-launch: recorded episode_0004 (no verdict: episode_0004: unreadable metadata.yaml"), lines
     assert [episode_verdict(tmp_path / f"episode_000{n}") for n in (1, 2, 3)] == [True, False, None]

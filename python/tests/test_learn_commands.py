@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import shutil
 from pathlib import Path
 
 import pytest
@@ -201,47 +202,75 @@ def test_demos_record_in_parallel_only_in_process(tmp_path):
         demos.run(args)
 
 
-def interrupted_run(tmp_path: Path, policy_type: str = "act") -> Path:
-    """An output directory as lerobot-train leaves it after its checkpoint of step 200 (its
-    checkpoints/last link and train_config.json; no weights, no process is started)."""
+def interrupted_run(tmp_path: Path, policy_type: str = "act", step: int = 200, processes: int = 1) -> Path:
+    """An output directory as lerobot-train leaves it after its checkpoint of `step` (the
+    checkpoints/last link, train_config.json and training_step.json; no weights, no process)."""
     output = tmp_path / "run"
-    checkpoint = output / "checkpoints" / "000200"
+    checkpoint = output / "checkpoints" / f"{step:06d}"
     (checkpoint / "pretrained_model").mkdir(parents=True)
-    (output / "checkpoints" / "last").symlink_to("000200")
-    config = {"policy": {"type": policy_type}, "dataset": {"root": str(tmp_path / "data")}, "steps": 4000, "batch_size": 32}
+    (checkpoint / "training_state").mkdir()
+    (output / "checkpoints" / "last").symlink_to(checkpoint.name)
+    config = {
+        "policy": {"type": policy_type, "device": "cpu"},
+        "dataset": {"root": str(tmp_path / "data")},
+        "steps": 4000,
+        "batch_size": 32,
+    }
     (checkpoint / "pretrained_model" / "train_config.json").write_text(json.dumps(config))
+    state = {"step": step, "num_processes": processes, "batch_size": 32}
+    (checkpoint / "training_state" / "training_step.json").write_text(json.dumps(state))
     return output
 
 
 def test_a_resumed_run_continues_its_checkpoint_with_its_own_settings(tmp_path):
     output = interrupted_run(tmp_path)
-    args = parse("act", "--resume", str(output), "--loader-workers", "0", "--policy-arg=--log_freq=10")
-    run_dir, config_file = lerobot_train.resume_settings(args)
-    assert run_dir == output.resolve() and lerobot_train.checkpoint_step(run_dir) == 200
-    # The dataset and length the evaluation and summary use are the checkpoint's.
-    assert (args.dataset, args.steps, args.batch_size) == (str(tmp_path / "data"), 4000, 32)
-    command = lerobot_train.resume_command(args, config_file, run_dir)
+    args = parse("act", "--resume", str(output), "--policy-arg=--log_freq=10")
+    run_dir, last = lerobot_train.resume_settings(args)
+    assert run_dir == output.resolve() and last.step == 200
+    # The dataset, length and device the evaluation and summary use are the run's.
+    assert (args.dataset, args.steps, args.batch_size, args.device) == (str(tmp_path / "data"), 4000, 32, "cpu")
+    command = lerobot_train.resume_command(args, last, run_dir)
     assert Path(command[0]).name == "lerobot-train"
     assert command[1:] == [
-        f"--config_path={config_file}",
+        f"--config_path={run_dir / 'checkpoints' / 'last' / 'pretrained_model' / 'train_config.json'}",
         "--resume=true",
         f"--output_dir={run_dir}",
         "--steps=4000",
-        "--num_workers=0",
+        "--policy.device=cpu",
+        "--num_workers=1",  # the CPU's loader, as for a new run
         "--log_freq=10",
     ]
-    longer = parse("act", "--resume", str(output), "--steps", "5000")
-    lerobot_train.resume_settings(longer)
-    assert longer.steps == 5000
+    longer = parse("act", "--resume", str(output), "--steps", "5000", "--save-every", "100", "--loader-workers", "0")
+    command = lerobot_train.resume_command(longer, lerobot_train.resume_settings(longer)[1], run_dir)
+    assert longer.steps == 5000 and {"--steps=5000", "--save_freq=100", "--num_workers=0"} <= set(command)
+
+
+def test_a_resumed_run_keeps_its_processes_and_may_be_a_copy_without_links(tmp_path):
+    output = interrupted_run(tmp_path, processes=2)
+    last = output / "checkpoints" / "last"
+    target = last.resolve()
+    last.unlink()
+    shutil.copytree(target, last)  # what scp -r or a zip makes of the link
+    args = parse("act", "--resume", str(output))
+    run_dir, checkpoint = lerobot_train.resume_settings(args)
+    assert checkpoint.step == 200 and args.num_processes == 2
+    command = lerobot_train.resume_command(args, checkpoint, run_dir)
+    # Two processes again, through accelerate, with no loader forked beside the gloo group.
+    assert Path(command[0]).name == "accelerate" and "--num_processes=2" in command and "--num_workers=0" in command
 
 
 def test_resume_refuses_what_it_cannot_continue(tmp_path):
     output = interrupted_run(tmp_path)
-    with pytest.raises(SystemExit, match="leave out --dataset"):
-        lerobot_train.resume_settings(parse("act", "--resume", str(output), "--dataset", str(tmp_path)))
+    with pytest.raises(SystemExit, match="leave out --dataset, --seed"):
+        lerobot_train.resume_settings(parse("act", "--resume", str(output), "--dataset", str(tmp_path), "--seed", "3"))
     with pytest.raises(SystemExit, match="resume it with so101-learn act"):
         lerobot_train.resume_settings(parse("diffusion", "--resume", str(output)))
     with pytest.raises(SystemExit, match="no checkpoint to resume from"):
         lerobot_train.resume_settings(parse("act", "--resume", str(tmp_path / "started-just-now")))
+    with pytest.raises(SystemExit, match="has trained 200 steps of 200 already: --steps N"):
+        lerobot_train.resume_settings(parse("act", "--resume", str(output), "--steps", "200"))
+    (output / "checkpoints" / "last").unlink()
+    with pytest.raises(SystemExit, match=r"beside the checkpoints 000200: point it at the newest whole one \(ln -sfn 000200"):
+        lerobot_train.resume_settings(parse("act", "--resume", str(output)))
     with pytest.raises(SystemExit, match="--dataset is required"):
         lerobot_train.run(parse("act"))

@@ -23,14 +23,37 @@ def test_the_variants_see_the_datasets_cameras_or_fewer_and_smaller(tmp_path):
     assert model_step.variant_shapes("recipe", shapes) == shapes
     assert set(model_step.variant_shapes("small-images", shapes).values()) == {(3, 48, 64)}
     assert list(model_step.variant_shapes("two-cameras", shapes)) == ["observation.images.top", "observation.images.wrist"]
+    two = {key: shapes[key] for key in list(shapes)[:2]}
+    with pytest.raises(ValueError, match="would measure the recipe again"):
+        model_step.variant_shapes("two-cameras", two)
 
 
-def test_the_policy_is_the_recipes(tmp_path):
+def test_the_policy_is_the_recipes_and_each_lever_is_applied(tmp_path):
+    import torch
+
     shapes = model_step.camera_shapes(camera_dataset(tmp_path, cameras=("top",), height=24, width=32))
-    config = model_step.build_policy(shapes).config
+    recipe = model_step.prepare("recipe", shapes, batch_size=2)
+    config = recipe.policy.config
     assert (config.use_vae, config.dim_model, config.n_encoder_layers, config.chunk_size) == (False, 256, 2, 20)
     assert config.pretrained_backbone_weights is None and config.vision_backbone == "resnet18"
-    assert model_step.measure("channels-last", shapes, batch_size=2, steps=1) > 0
+    assert recipe.optimizer.defaults["weight_decay"] == 1e-4 and recipe.grad_clip_norm == 10
+
+    def first_conv(step):
+        return next(m for m in step.policy.modules() if isinstance(m, torch.nn.Conv2d)).weight
+
+    layout = torch.channels_last
+    assert not first_conv(recipe).is_contiguous(memory_format=layout)
+    channels_last = model_step.prepare("channels-last", shapes, batch_size=2)
+    assert first_conv(channels_last).is_contiguous(memory_format=layout)
+    assert channels_last.batch["observation.images.top"].is_contiguous(memory_format=layout)
+    bf16 = model_step.prepare("bf16-autocast", shapes, batch_size=2)
+    assert isinstance(bf16.autocast, torch.autocast) and bf16.autocast.fast_dtype == torch.bfloat16
+    compiled = model_step.prepare("compile", shapes, batch_size=2)
+    assert hasattr(compiled.forward, "_torchdynamo_orig_callable") and not hasattr(recipe.forward, "_torchdynamo_orig_callable")
+
+    before = first_conv(channels_last).detach().clone()
+    channels_last()
+    assert not first_conv(channels_last).detach().equal(before)  # a step trains the backbone
 
 
 def test_a_dataset_without_cameras_is_refused(tmp_path):

@@ -122,7 +122,7 @@ def test_an_interrupted_training_resumes_to_the_weights_of_an_uninterrupted_one(
     (checkpoints / "last").symlink_to("000002")
 
     done = learn("act", "--resume", str(output), "--eval", "0", timeout=300)
-    assert "trained 4 steps (batch 4)" in done.stdout and "resumed from step 2" in done.stdout, done.stdout[-2000:]
+    assert "trained to step 4 (batch 4), resumed from step 2: 2 steps" in done.stdout, done.stdout[-2000:]
     assert os.readlink(checkpoints / "last") == "000004"
     resumed = load_file(checkpoints / "000004" / "pretrained_model" / "model.safetensors")
     assert resumed.keys() == uninterrupted.keys()

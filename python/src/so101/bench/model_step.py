@@ -12,6 +12,8 @@ Variants:
 - small-images: every camera at two thirds of the dataset's size (96x72 -> 64x48);
 - two-cameras: the dataset's first and last camera only (top and wrist for the recipe's three).
 The last two change what the policy sees: their success is a training's question, not this one's.
+Every variant steps as lerobot-train's update_policy does (AdamW with the recipe's rate and weight
+decay, gradients clipped to the recipe's norm).
 
 No DDS, no dataset reading (its meta/info.json gives the shapes). Prints a Markdown report; --json
 writes the numbers. so101-bench train_step measures the whole step as lerobot-train runs it.
@@ -24,6 +26,8 @@ import contextlib
 import json
 import sys
 import time
+from collections.abc import Callable
+from dataclasses import dataclass
 from pathlib import Path
 
 from ..subcommands import Subcommand, run_alone
@@ -42,22 +46,26 @@ def setting(value):
 
 def camera_shapes(dataset: Path) -> dict[str, tuple[int, int, int]]:
     """The dataset's cameras and their (channels, height, width), from its meta/info.json."""
+    from ..learn.lerobot_train import dataset_cameras
+
+    cameras = dataset_cameras(dataset)
+    if not cameras:
+        raise SystemExit(f"so101-bench model_step: {dataset} has no cameras: the levers measured here are the images'")
     features = json.loads((dataset / "meta" / "info.json").read_text())["features"]
     shapes = {}
-    for key, feature in features.items():
-        if feature.get("dtype") in ("video", "image"):
-            height, width, channels = feature["shape"]
-            shapes[key] = (channels, height, width)
-    if not shapes:
-        raise SystemExit(f"so101-bench model_step: {dataset} has no cameras: the levers measured here are the images'")
+    for key in cameras:
+        height, width, channels = features[key]["shape"]
+        shapes[key] = (channels, height, width)
     return shapes
 
 
 def variant_shapes(name: str, shapes: dict[str, tuple[int, int, int]]) -> dict[str, tuple[int, int, int]]:
-    """The cameras a variant's policy sees."""
+    """The cameras a variant's policy sees (two-cameras: only for a dataset of more than two)."""
     if name == "small-images":
         return {key: (c, h * 2 // 3, w * 2 // 3) for key, (c, h, w) in shapes.items()}
-    if name == "two-cameras" and len(shapes) > 2:
+    if name == "two-cameras":
+        if len(shapes) <= 2:
+            raise ValueError(f"the dataset has {len(shapes)} camera(s): two-cameras would measure the recipe again")
         keys = list(shapes)
         return {key: shapes[key] for key in (keys[0], keys[-1])}
     return dict(shapes)
@@ -83,13 +91,38 @@ def build_policy(shapes: dict[str, tuple[int, int, int]]):
     return ACTPolicy(config)
 
 
-def measure(name: str, shapes: dict[str, tuple[int, int, int]], batch_size: int, steps: int) -> float:
-    """Mean seconds of one training step of the variant, after two warm-up steps."""
+@dataclass
+class TrainingStep:
+    """One variant's training step, ready to run: the policy, a batch, and how the step calls it."""
+
+    policy: object
+    batch: dict
+    forward: Callable
+    autocast: contextlib.AbstractContextManager
+    optimizer: object
+    grad_clip_norm: float
+
+    def __call__(self) -> None:
+        import torch
+
+        with self.autocast:
+            loss, _ = self.forward(self.batch)
+        loss.backward()
+        torch.nn.utils.clip_grad_norm_(self.policy.parameters(), self.grad_clip_norm)
+        self.optimizer.step()
+        self.optimizer.zero_grad()
+
+
+def prepare(name: str, shapes: dict[str, tuple[int, int, int]], batch_size: int) -> TrainingStep:
+    """The variant's step: the recipe's policy, a random batch of its inputs, and AdamW with the
+    recipe's rate, weight decay and gradient clipping (as lerobot-train's update_policy steps)."""
     import torch
 
+    from ..learn.lerobot_train import PRESETS
+
     torch.manual_seed(0)
-    wide = variant_shapes(name, shapes)
-    policy = build_policy(wide)
+    seen = variant_shapes(name, shapes)
+    policy = build_policy(seen)
     policy.train()
     chunk, joints = policy.config.chunk_size, policy.config.output_features["action"].shape[0]
     batch = {
@@ -97,21 +130,27 @@ def measure(name: str, shapes: dict[str, tuple[int, int, int]], batch_size: int,
         "action": torch.randn(batch_size, chunk, joints),
         "action_is_pad": torch.zeros(batch_size, chunk, dtype=torch.bool),
     }
-    batch |= {key: torch.rand(batch_size, *shape) for key, shape in wide.items()}
+    batch |= {key: torch.rand(batch_size, *shape) for key, shape in seen.items()}
     if name == "channels-last":
         policy = policy.to(memory_format=torch.channels_last)
-        batch |= {key: batch[key].contiguous(memory_format=torch.channels_last) for key in wide}
-    optimizer = torch.optim.AdamW(policy.parameters(), lr=1e-4)
-    forward = torch.compile(policy.forward) if name == "compile" else policy.forward
-    autocast = torch.autocast("cpu", dtype=torch.bfloat16) if name == "bf16-autocast" else contextlib.nullcontext()
+        batch |= {key: batch[key].contiguous(memory_format=torch.channels_last) for key in seen}
+    training = PRESETS["act"]["training"]
+    optimizer = torch.optim.AdamW(
+        policy.parameters(), lr=training["optimizer.lr"], weight_decay=training["optimizer.weight_decay"]
+    )
+    return TrainingStep(
+        policy=policy,
+        batch=batch,
+        forward=torch.compile(policy.forward) if name == "compile" else policy.forward,
+        autocast=torch.autocast("cpu", dtype=torch.bfloat16) if name == "bf16-autocast" else contextlib.nullcontext(),
+        optimizer=optimizer,
+        grad_clip_norm=training["optimizer.grad_clip_norm"],
+    )
 
-    def step() -> None:
-        with autocast:
-            loss, _ = forward(batch)
-        loss.backward()
-        optimizer.step()
-        optimizer.zero_grad()
 
+def measure(name: str, shapes: dict[str, tuple[int, int, int]], batch_size: int, steps: int) -> float:
+    """Mean seconds of one training step of the variant, after two warm-up steps."""
+    step = prepare(name, shapes, batch_size)
     for _ in range(2):
         step()
     started = time.perf_counter()
@@ -131,6 +170,11 @@ def run(args) -> int:
     chosen = args.variant or list(VARIANTS)
     results = {}
     for name in chosen:
+        try:
+            variant_shapes(name, shapes)
+        except ValueError as why:
+            print(f"==> {name}: left out ({why})", file=sys.stderr, flush=True)
+            continue
         print(f"==> {name}", file=sys.stderr, flush=True)
         results[name] = {"step_s": measure(name, shapes, args.batch_size, args.steps), "cameras": variant_shapes(name, shapes)}
         print(f"    {results[name]['step_s']:.3f} s", file=sys.stderr, flush=True)

@@ -36,6 +36,7 @@ from pathlib import Path
 from .. import contract
 from ..dataset.parquet import read_parquet
 from ..paths import repo_root
+from .checkpoints import Checkpoint, CheckpointError, last_checkpoint
 from .eval_recipe import run_policy_command
 
 # ACT: every input and the actions by their mean and std (the cube's pose too: its z of ~0.77 m and a
@@ -160,14 +161,15 @@ def add_arguments(p: argparse.ArgumentParser, name: str) -> None:
     p.add_argument("--steps", type=int, default=None, help=f"training steps (default {preset['steps']:,}{with_cameras})")
     with_cameras = f"; {vision['batch_size']} with cameras" if vision else ""
     p.add_argument("--batch-size", type=int, default=None, help=f"batch size (default {preset['batch_size']}{with_cameras})")
-    p.add_argument("--save-every", type=int, default=1000, help="checkpoint every this many steps")
-    p.add_argument("--device", default="cpu", help="torch device (cpu, cuda)")
+    p.add_argument("--save-every", type=int, default=None, help="checkpoint every this many steps (default 1,000)")
+    p.add_argument("--device", default=None, help="torch device (cpu, cuda; default cpu, or a resumed run's)")
     p.add_argument(
         "--num-processes",
         type=int,
-        default=1,
+        default=None,
         help="training processes through LeRobot's multi-GPU path (accelerate launch): one per GPU with --device "
-        "cuda; on the CPU, processes sharing the cores (each takes the whole batch: the effective batch is N times it)",
+        "cuda; on the CPU, processes sharing the cores (each takes the whole batch: the effective batch is N times it); "
+        "default 1, or as many as a resumed run had",
     )
     p.add_argument(
         "--loader-workers",
@@ -176,7 +178,7 @@ def add_arguments(p: argparse.ArgumentParser, name: str) -> None:
         help="dataset loader processes per training process (default 1 on the CPU, where they share the cores with "
         "the step; with --device cuda up to 8, as the CPU's cores allow: a GPU waits on decoding otherwise)",
     )
-    p.add_argument("--seed", type=int, default=1000, help="training seed")
+    p.add_argument("--seed", type=int, default=None, help="training seed (default 1000)")
     p.add_argument(
         "--torch-threads",
         type=int,
@@ -190,8 +192,9 @@ def add_arguments(p: argparse.ArgumentParser, name: str) -> None:
         metavar="OUTPUT",
         default=None,
         help="continue the interrupted run in OUTPUT from its last checkpoint (LeRobot's resume: weights, optimizer, "
-        "learning-rate schedule, data order) instead of starting one; its settings and dataset are the checkpoint's "
-        "(--steps may lengthen it), then the evaluation as asked",
+        "learning-rate schedule, data order) instead of starting one; its dataset, batch size, seed, device and "
+        "processes are the run's (--steps lengthens it, --device and --num-processes override), then the evaluation "
+        "as asked",
     )
     p.add_argument("--eval", type=int, default=20, metavar="M", help="then evaluate over M seeded episodes (0: no evaluation)")
     p.add_argument("--eval-seed", type=int, default=1000, help="seed of the first evaluation episode (demos start at 0)")
@@ -206,8 +209,19 @@ def add_arguments(p: argparse.ArgumentParser, name: str) -> None:
     p.set_defaults(policy_type=name)
 
 
+# A new run's settings left out of its command line (None there: a resumed run takes the run's own).
+NEW_RUN_DEFAULTS = {"device": "cpu", "num_processes": 1, "save_every": 1000, "seed": 1000}
+
+
+def fill_new_run_defaults(args) -> None:
+    for key, value in NEW_RUN_DEFAULTS.items():
+        if getattr(args, key) is None:
+            setattr(args, key, value)
+
+
 def train_command(args, output: Path) -> list[str]:
     """lerobot-train with the preset, every setting spelled out so the command reproduces the run."""
+    fill_new_run_defaults(args)
     resolve_length(args)
     dataset = Path(args.dataset).resolve()
     command = [
@@ -245,10 +259,13 @@ def with_run_settings(command: list[str], args, output: Path) -> list[str]:
         f"--output_dir={output}",
         *args.policy_arg,
     ]
-    if args.num_processes > 1:
-        # The same arguments to lerobot-train's module in each of the launched processes.
-        command = launcher(args) + command[1:]
-    return command
+    return launched(command, args)
+
+
+def launched(command: list[str], args) -> list[str]:
+    """A lerobot-train command as it runs: itself, or for several processes the same arguments to
+    lerobot-train's module in each process accelerate launches."""
+    return launcher(args) + command[1:] if args.num_processes > 1 else command
 
 
 def loader_workers(args) -> int:
@@ -337,67 +354,64 @@ def eval_command(args, checkpoint: Path, eval_dir: Path) -> list[str]:
     )
 
 
-def last_train_config(output: Path) -> Path:
-    """The train_config.json of the run's last checkpoint (LeRobot points checkpoints/last at a
-    checkpoint once it is written whole)."""
-    return output / "checkpoints" / "last" / "pretrained_model" / "train_config.json"
-
-
-def resume_settings(args) -> tuple[Path, Path]:
-    """For --resume: the run's output directory and its last checkpoint's train_config.json; the
-    dataset, steps and batch size in args become the checkpoint's (--steps, when given, wins)."""
+def resume_settings(args) -> tuple[Path, Checkpoint]:
+    """For --resume: the run's output directory and last checkpoint, with args' dataset, length,
+    batch, device and processes those of the run (--steps, --device, --num-processes override)."""
     name = f"so101-learn {args.policy_type}"
-    if args.dataset or args.output or args.batch_size:
+    own = {"--dataset": args.dataset, "--output": args.output, "--batch-size": args.batch_size, "--seed": args.seed}
+    given = [flag for flag, value in own.items() if value is not None]
+    if given:
         raise SystemExit(
-            f"{name}: --resume takes the dataset, output and batch size from the run: leave out --dataset, --output and --batch-size"
+            f"{name}: --resume continues the run with its own dataset, output, batch size and seed: leave out {', '.join(given)}"
         )
     output = Path(args.resume).resolve()
-    config_file = last_train_config(output)
-    if not config_file.is_file():
-        raise SystemExit(
-            f"{name}: {output} has no checkpoint to resume from ({config_file.relative_to(output)} is missing): "
-            "a run writes its first one after --save-every steps"
-        )
-    config = json.loads(config_file.read_text())
+    try:
+        checkpoint = last_checkpoint(output)
+    except CheckpointError as error:
+        raise SystemExit(f"{name}: {error}") from error
+    config = checkpoint.config
     if config["policy"]["type"] != args.policy_type:
-        raise SystemExit(
-            f"{name}: {output} trained a {config['policy']['type']} policy: resume it with so101-learn {config['policy']['type']}"
-        )
-    args.dataset = config["dataset"]["root"]
+        trains = config["policy"]["type"]
+        raise SystemExit(f"{name}: {output} trains a {trains} policy: resume it with so101-learn {trains}")
+    args.dataset, args.batch_size = config["dataset"]["root"], config["batch_size"]
     args.steps = config["steps"] if args.steps is None else args.steps
-    args.batch_size = config["batch_size"]
-    return output, config_file
+    if args.device is None:
+        args.device = config["policy"]["device"]
+    if args.num_processes is None:
+        args.num_processes = checkpoint.num_processes or 1
+    if checkpoint.step >= args.steps:
+        raise SystemExit(
+            f"{name}: {output} has trained {checkpoint.step} steps of {args.steps} already: --steps N, over "
+            f"{checkpoint.step}, lengthens it; so101-run-policy {checkpoint.config_file.parent} --eval M evaluates it"
+        )
+    return output, checkpoint
 
 
-def resume_command(args, config_file: Path, output: Path) -> list[str]:
-    """lerobot-train resuming the checkpoint of `config_file` into the run's own directory, with
-    the run settings given again (steps, loaders, processes, --policy-arg)."""
+def resume_command(args, checkpoint: Checkpoint, output: Path) -> list[str]:
+    """lerobot-train resuming `checkpoint` into the run's own directory, with the settings a run
+    takes on each start given again (length, device, loaders, processes, --policy-arg)."""
     command = [
         str(Path(sys.executable).with_name("lerobot-train")),
-        f"--config_path={config_file}",
+        f"--config_path={checkpoint.config_file}",
         "--resume=true",
         f"--output_dir={output}",
         f"--steps={args.steps}",
+        f"--policy.device={args.device}",
+        f"--num_workers={loader_workers(args)}",
     ]
-    if args.loader_workers is not None:
-        command.append(f"--num_workers={args.loader_workers}")
-    command += args.policy_arg
-    return launcher(args) + command[1:] if args.num_processes > 1 else command
-
-
-def checkpoint_step(output: Path) -> int:
-    """The step of the run's last checkpoint (its directory's name, e.g. 000200); 0 when none."""
-    last = output / "checkpoints" / "last"
-    return int(last.resolve().name) if last.exists() else 0
+    if args.save_every is not None:
+        command.append(f"--save_freq={args.save_every}")
+    return launched(command + args.policy_arg, args)
 
 
 def run(args) -> int:
     name = f"so101-learn {args.policy_type}"
     if args.resume:
-        output, config_file = resume_settings(args)
-        resumed_from = checkpoint_step(output)
+        output, last = resume_settings(args)
+        resumed_from = last.step
     else:
         resumed_from = 0
+        fill_new_run_defaults(args)
         if not args.dataset:
             raise SystemExit(f"{name}: --dataset is required (or --resume OUTPUT to continue a run)")
         if not (Path(args.dataset) / "meta" / "info.json").is_file():
@@ -414,7 +428,7 @@ def run(args) -> int:
     environment = dict(os.environ)
     if args.torch_threads:
         environment["OMP_NUM_THREADS"] = str(args.torch_threads)
-    command = resume_command(args, config_file, output) if args.resume else train_command(args, output)
+    command = resume_command(args, last, output) if args.resume else train_command(args, output)
     print("==> " + " ".join(command), flush=True)
     started = time.monotonic()
     if subprocess.run(command, env=environment).returncode != 0:
@@ -428,14 +442,14 @@ def run(args) -> int:
         command = eval_command(args, checkpoint, eval_dir)
         print("==> " + " ".join(command), flush=True)
         if subprocess.run(command, env=environment).returncode != 0:
-            raise SystemExit(f"so101-learn {args.policy_type}: so101-run-policy --eval failed")
+            raise SystemExit(f"{name}: so101-run-policy --eval failed")
         result = json.loads((eval_dir / "eval_info.json").read_text())["aggregated"]
 
-    resumed = f", resumed from step {resumed_from}" if args.resume else ""  # the steps of this command: the difference
-    print(
-        f"\nSummary: {args.policy_type} trained {args.steps} steps (batch {args.batch_size}) in {train_s / 60:.1f} min on "
-        f"{args.device}{resumed}"
-    )
+    if args.resume:
+        trained = f"trained to step {args.steps} (batch {args.batch_size}), resumed from step {resumed_from}: {args.steps - resumed_from} steps"
+    else:
+        trained = f"trained {args.steps} steps (batch {args.batch_size})"
+    print(f"\nSummary: {args.policy_type} {trained} in {train_s / 60:.1f} min on {args.device}")
     print(f"  policy:  {checkpoint}")
     if result:
         low, high = result["pc_success_ci95"]

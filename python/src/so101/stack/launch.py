@@ -207,10 +207,9 @@ def report_closed_episodes(bags: Path, reported: set[Path]) -> None:
             continue
         reported.add(metadata)
         try:
-            success = episode_verdict(metadata.parent)
-        except BagError:  # a file being written is reported without its verdict
-            success = None
-        verdict = {True: "success", False: "failure", None: "no verdict"}[success]
+            verdict = {True: "success", False: "failure", None: "no verdict"}[episode_verdict(metadata.parent)]
+        except BagError as error:  # shown now, before a conversion meets it
+            verdict = f"no verdict: {error}"
         print(f"so101-launch: recorded {metadata.parent.name} ({verdict})", flush=True)
 
 

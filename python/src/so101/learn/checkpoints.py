@@ -1,0 +1,57 @@
+"""A lerobot-train run directory as LeRobot leaves it, read for `so101-learn act|diffusion --resume`:
+OUTPUT/checkpoints/<step>/ with pretrained_model/ (the weights and train_config.json) and
+training_state/ (optimizer, scheduler, RNG, training_step.json), and checkpoints/last pointing at
+the newest checkpoint once it is written whole (the names are LeRobot's, lerobot.utils.constants)."""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass
+from pathlib import Path
+
+CHECKPOINTS = "checkpoints"
+LAST = "last"
+TRAIN_CONFIG = Path("pretrained_model") / "train_config.json"
+TRAINING_STEP = Path("training_state") / "training_step.json"
+
+
+class CheckpointError(Exception):
+    """A run directory with no checkpoint to resume from; the message says what is missing."""
+
+
+@dataclass(frozen=True)
+class Checkpoint:
+    """The last checkpoint of a run."""
+
+    config_file: Path  # its train_config.json: what lerobot-train --config_path takes
+    config: dict  # that file's settings (policy, dataset, steps, batch_size, ...)
+    step: int  # the training step it was written at
+    num_processes: int | None  # the processes that trained it (None: a LeRobot older than the record)
+
+
+def last_checkpoint(output: Path) -> Checkpoint:
+    """The run's last checkpoint. checkpoints/last may be a link (as LeRobot makes it) or a
+    directory (a run copied without links). Raises CheckpointError when there is none, or when
+    it lacks its settings or its step."""
+    last = output / CHECKPOINTS / LAST
+    if not last.is_dir():
+        numbered = sorted(path.name for path in (output / CHECKPOINTS).glob("[0-9]*") if path.is_dir())
+        if numbered:
+            raise CheckpointError(
+                f"{output}: {CHECKPOINTS}/{LAST} is missing or points nowhere, beside the checkpoints "
+                f"{', '.join(numbered)}: point it at the newest whole one (ln -sfn {numbered[-1]} {last})"
+            )
+        raise CheckpointError(
+            f"{output} has no checkpoint to resume from (no {CHECKPOINTS}/{LAST}): a run writes its first one "
+            "after --save-every steps"
+        )
+    for required in (TRAIN_CONFIG, TRAINING_STEP):
+        if not (last / required).is_file():
+            raise CheckpointError(f"{output}: the last checkpoint lacks {required}")
+    state = json.loads((last / TRAINING_STEP).read_text())
+    return Checkpoint(
+        config_file=last / TRAIN_CONFIG,
+        config=json.loads((last / TRAIN_CONFIG).read_text()),
+        step=int(state["step"]),
+        num_processes=state.get("num_processes"),
+    )
