@@ -162,10 +162,12 @@ def camera_demos(tmp_path_factory) -> Path:
     return output / "dataset"
 
 
-def test_the_camera_recipe_trains_from_scratch_with_colour_augmentation_and_evaluates_both_ways(camera_demos, tmp_path):
+def test_the_camera_recipe_trains_from_scratch_with_augmentation_and_evaluates_both_ways(camera_demos, tmp_path):
     output = tmp_path / "act"
     tiny = ["--policy.dim_model=32", "--policy.n_heads=2", "--policy.dim_feedforward=64", "--policy.n_encoder_layers=1"]
     argv = ["act", "--dataset", str(camera_demos), "--steps", "3", "--batch-size", "4", "--output", str(output)]
+    # Every augmentation set, through lerobot-train's parser and LeRobot's loader.
+    argv += ["--augment", "colour,shift,blur,noise"]
     argv += ["--eval", "1", "--eval-videos", "1", "--quiet"] + [f"--policy-arg={arg}" for arg in tiny]
     done = learn(*argv, timeout=400)
 
@@ -178,6 +180,11 @@ def test_the_camera_recipe_trains_from_scratch_with_colour_augmentation_and_eval
     assert config["pretrained_backbone_weights"] is None
     transforms = json.loads((checkpoint / "train_config.json").read_text())["dataset"]["image_transforms"]
     assert transforms["enable"] and "affine" not in transforms["tfs"] and "brightness" in transforms["tfs"]
+    assert transforms["tfs"]["shift"]["type"] == "RandomAffine" and transforms["tfs"]["shift"]["kwargs"]["translate"] == [
+        0.02,
+        0.02,
+    ]
+    assert {"blur", "noise"} <= set(transforms["tfs"])
 
     info = json.loads((output / "eval" / "eval_info.json").read_text())
     assert info["aggregated"]["episodes"] == 1 and "success:" in done.stdout

@@ -36,6 +36,7 @@ from pathlib import Path
 from .. import contract
 from ..dataset.parquet import read_parquet
 from ..paths import repo_root
+from . import augment
 from .checkpoints import Checkpoint, CheckpointError, last_checkpoint
 from .eval_recipe import run_policy_command
 
@@ -96,28 +97,21 @@ PRESETS: dict[str, dict] = {
 # VISION: a dataset with cameras (observation.images.*) adds to the preset:
 # - the ResNet-18 backbone learns from scratch: ImageNet weights cannot be downloaded offline, and
 #   pictures of 96x72 pixels are far from ImageNet's anyway;
-# - LeRobot's image augmentation, colour only (brightness, contrast, saturation, hue, sharpness):
-#   its random affine shift moves the whole picture by up to 5 %, i.e. the cube by centimetres on
-#   the table as the top camera sees it, which a policy that must grasp within millimetres cannot
-#   tell from the cube really being elsewhere;
-GEOMETRIC_TRANSFORMS = ("affine",)
-
-
-def colour_transforms() -> str:
-    """LeRobot's default image transforms without the geometric ones, as lerobot-train's JSON."""
-    from dataclasses import asdict
-
-    from lerobot.transforms.transforms import ImageTransformsConfig
-
-    transforms = {name: asdict(config) for name, config in ImageTransformsConfig().tfs.items()}
-    return json.dumps({name: config for name, config in transforms.items() if name not in GEOMETRIC_TRANSFORMS})
-
-
-def vision_preset() -> tuple[dict, dict]:
-    """(policy, training) settings added to either preset for a dataset with cameras."""
+# - image augmentation, LeRobot's colour transforms by default (so101.learn.augment says why not
+#   its shift, and what --augment adds).
+def vision_preset(sets: tuple[str, ...] = (augment.DEFAULT,)) -> tuple[dict, dict]:
+    """(policy, training) settings added to either preset for a dataset with cameras, augmented
+    by `sets` (so101.learn.augment)."""
     policy = {"pretrained_backbone_weights": "null"}  # ACT's and Diffusion's default: ImageNet weights
-    training = {"dataset.image_transforms.enable": "true", "dataset.image_transforms.tfs": colour_transforms()}
-    return policy, training
+    return policy, augment.training_settings(sets)
+
+
+def augment_sets(text: str) -> tuple[str, ...]:
+    """--augment's value, checked as argparse reports a wrong one."""
+    try:
+        return augment.parse_sets(text)
+    except ValueError as error:
+        raise argparse.ArgumentTypeError(str(error)) from error
 
 
 # ACT with cameras: its length on this CPU (1.2 steps/s, about 55 minutes). Success on tuning
@@ -185,6 +179,14 @@ def add_arguments(p: argparse.ArgumentParser, name: str) -> None:
         default=None,
         help="torch's CPU threads for training and evaluation (OMP_NUM_THREADS; 1 keeps a shared machine responsive)",
     )
+    p.add_argument(
+        "--augment",
+        type=augment_sets,
+        default=None,
+        metavar="SETS",
+        help=f"image augmentation of a dataset with cameras: a comma list of {', '.join(augment.SETS)}, or none "
+        f"(default {augment.DEFAULT}; so101.learn.augment describes each)",
+    )
     p.add_argument("--policy-arg", action="append", default=[], help="one more lerobot-train argument (repeatable)")
     p.add_argument("--output", default=None, help=f"lerobot-train's output directory (default outputs/{name}-<time>/)")
     p.add_argument(
@@ -236,7 +238,7 @@ def train_command(args, output: Path) -> list[str]:
     command.append(f"--policy.normalization_mapping={preset['normalization']}")
     policy, training = dict(preset["policy"]), dict(preset.get("training", {}))
     if has_cameras(dataset):
-        vision_policy, vision_training = vision_preset()
+        vision_policy, vision_training = vision_preset((augment.DEFAULT,) if args.augment is None else args.augment)
         policy.update(vision_policy)
         training.update(vision_training)
     command += [f"--policy.{key}={value}" for key, value in policy.items()]
@@ -358,7 +360,13 @@ def resume_settings(args) -> tuple[Path, Checkpoint]:
     """For --resume: the run's output directory and last checkpoint, with args' dataset, length,
     batch, device and processes those of the run (--steps, --device, --num-processes override)."""
     name = f"so101-learn {args.policy_type}"
-    own = {"--dataset": args.dataset, "--output": args.output, "--batch-size": args.batch_size, "--seed": args.seed}
+    own = {
+        "--dataset": args.dataset,
+        "--output": args.output,
+        "--batch-size": args.batch_size,
+        "--seed": args.seed,
+        "--augment": args.augment,
+    }
     given = [flag for flag, value in own.items() if value is not None]
     if given:
         raise SystemExit(
