@@ -31,6 +31,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from ..subcommands import Subcommand, run_alone
+from . import common as bench_common
 
 VARIANTS = ("recipe", "channels-last", "compile", "bf16-autocast", "small-images", "two-cameras")
 
@@ -180,17 +181,17 @@ def run(args) -> int:
         print(f"    {results[name]['step_s']:.3f} s", file=sys.stderr, flush=True)
     anchor = results.get("recipe")
     sizes = ", ".join(f"{key.rsplit('.', 1)[-1]} {w}x{h}" for key, (_, h, w) in shapes.items())
-    print(
-        f"## The camera ACT's model step: batch {args.batch_size}, {sizes}, {args.steps} steps per variant, {torch.get_num_threads()} torch threads\n"
-    )
-    print("| variant | model step | step / recipe's |")
-    print("|---|---|---|")
+    lines = [
+        f"## The camera ACT's model step: batch {args.batch_size}, {sizes}, {args.steps} steps per variant, "
+        f"{torch.get_num_threads()} torch threads\n",
+        "| variant | model step | step / recipe's |",
+        "|---|---|---|",
+    ]
     for name, r in results.items():
         ratio = f"{r['step_s'] / anchor['step_s']:.2f}" if anchor else "-"
-        print(f"| {name} | {r['step_s']:.3f} s | {ratio} |")
-    if args.json:
-        args.json.write_text(json.dumps({"batch_size": args.batch_size, "steps": args.steps, "variants": results}, indent=2))
-    return 0
+        lines.append(f"| {name} | {r['step_s']:.3f} s | {ratio} |")
+    numbers = {"batch_size": args.batch_size, "steps": args.steps, "variants": results}
+    return bench_common.report(lines, numbers, args.json)
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:

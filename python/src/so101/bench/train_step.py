@@ -28,6 +28,7 @@ import time
 from pathlib import Path
 
 from ..subcommands import Subcommand, run_alone
+from . import common as bench_common
 
 VARIANTS = {
     "recipe": [],
@@ -80,15 +81,17 @@ def run(args) -> int:
             # As it comes: a slow variant (bf16 without the CPU's support) may be cut short.
             print(f"    {json.dumps(results[name])}", file=sys.stderr, flush=True)
     anchor = results.get("recipe")
-    print(f"## A training step: so101-learn {args.policy} on {args.dataset.name}, {args.steps} steps per variant\n")
-    print("| variant | model step (updt_s) | batch wait (data_s) | step | steps/s | step / recipe's |")
-    print("|---|---|---|---|---|---|")
+    lines = [
+        f"## A training step: so101-learn {args.policy} on {args.dataset.name}, {args.steps} steps per variant\n",
+        "| variant | model step (updt_s) | batch wait (data_s) | step | steps/s | step / recipe's |",
+        "|---|---|---|---|---|---|",
+    ]
     for name, r in results.items():
         ratio = f"{r['step_s'] / anchor['step_s']:.2f}" if anchor else "-"
-        print(f"| {name} | {r['update_s']:.3f} s | {r['data_s']:.3f} s | {r['step_s']:.3f} s | {1 / r['step_s']:.2f} | {ratio} |")
-    if args.json:
-        args.json.write_text(json.dumps({"policy": args.policy, "steps": args.steps, "variants": results}, indent=2))
-    return 0
+        lines.append(
+            f"| {name} | {r['update_s']:.3f} s | {r['data_s']:.3f} s | {r['step_s']:.3f} s | {1 / r['step_s']:.2f} | {ratio} |"
+        )
+    return bench_common.report(lines, {"policy": args.policy, "steps": args.steps, "variants": results}, args.json)
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
