@@ -212,7 +212,7 @@ def add_arguments(p: argparse.ArgumentParser, name: str) -> None:
 
 
 # A new run's settings left out of its command line (None there: a resumed run takes the run's own).
-NEW_RUN_DEFAULTS = {"device": "cpu", "num_processes": 1, "save_every": 1000, "seed": 1000}
+NEW_RUN_DEFAULTS = {"device": "cpu", "num_processes": 1, "save_every": 1000, "seed": 1000, "augment": (augment.DEFAULT,)}
 
 
 def fill_new_run_defaults(args) -> None:
@@ -238,7 +238,7 @@ def train_command(args, output: Path) -> list[str]:
     command.append(f"--policy.normalization_mapping={preset['normalization']}")
     policy, training = dict(preset["policy"]), dict(preset.get("training", {}))
     if has_cameras(dataset):
-        vision_policy, vision_training = vision_preset((augment.DEFAULT,) if args.augment is None else args.augment)
+        vision_policy, vision_training = vision_preset(args.augment)
         policy.update(vision_policy)
         training.update(vision_training)
     command += [f"--policy.{key}={value}" for key, value in policy.items()]
