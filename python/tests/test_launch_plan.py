@@ -51,6 +51,19 @@ def test_raw_images_and_the_users_own_flags(binaries):
         launch.parser().parse_args(["--jpeg-quality", "0"])
 
 
+def test_lockstep_steps_the_sim_once_per_command_of_the_expert(binaries):
+    nodes = argv_of(["--control", "expert", "--speed", "lockstep"])
+    sim, teleop = nodes["so101_sim_node"], nodes["teleop_node"]
+    assert "--lockstep" in sim and "--step-on-command" in sim and "--speed" not in sim
+    assert "--lockstep" in teleop and "--sim-time" not in teleop
+    timed = argv_of(["--control", "expert", "--speed", "2"])
+    assert timed["so101_sim_node"][timed["so101_sim_node"].index("--speed") + 1] == "2"
+    assert "--sim-time" in timed["teleop_node"] and "--lockstep" not in timed["teleop_node"]
+    # A person cannot keep pace with a sim that waits for each command.
+    with pytest.raises(SystemExit, match="lockstep"):
+        argv_of(["--control", "teleop", "--speed", "lockstep"])
+
+
 def test_the_compressed_set_is_recorder_nodes_default_set_with_compressed_cameras():
     source = (repo_root() / "crates" / "recorder_node" / "src" / "topics.rs").read_text()
     block = re.search(r"pub const DEFAULT_PATTERNS: &\[&str\] = &\[(.*?)\];", source, re.S).group(1)

@@ -27,6 +27,13 @@ def test_demos_record_with_the_experts_noise_and_no_cameras_by_default(tmp_path)
     assert f"--bags={tmp_path / 'bags'}" in command
 
 
+def test_demos_record_in_lockstep_or_at_a_speed(tmp_path):
+    assert "--speed=lockstep" in demos.launch_command(parse("demos", "--speed", "lockstep"), tmp_path)
+    assert "--speed=0.5" in demos.launch_command(parse("demos", "--speed", "0.5"), tmp_path)
+    with pytest.raises(SystemExit):
+        parse("demos", "--speed", "fast")
+
+
 def test_demos_pass_the_servo_model_and_the_randomization_to_the_sim(tmp_path):
     fit, ranges = tmp_path / "fit.json", tmp_path / "mine.toml"
     fit.write_text("{}")

@@ -51,6 +51,13 @@ pub struct Args {
     /// simulation at any --speed.
     #[arg(long)]
     pub sim_time: bool,
+    /// Expert: advance in step with a sim started with --lockstep --step-on-command. Each command
+    /// is one of the sim's control periods (30 Hz), the next computed once that period's
+    /// /joint_states, /cube/pose and /task/success are in, time read from the states' stamps:
+    /// the expert sees every period's state whatever the machine's load, so its motion repeats
+    /// for one seed, as fast as the machine goes.
+    #[arg(long, conflicts_with_all = ["sim_time", "rate", "no_reset"])]
+    pub lockstep: bool,
     /// Full joint speed in joint mode, rad/s.
     #[arg(long, default_value_t = 1.0, value_parser = parse_positive("speed", MAX_JOINT_SPEED))]
     pub joint_speed: f64,
@@ -162,5 +169,19 @@ mod tests {
         let args = Args::parse_from(["teleop_node"]);
         assert_eq!(args.base_xyz, SIM_BASE_IN_WORLD);
         assert_eq!(args.bin_xyz, SIM_BIN_IN_WORLD);
+    }
+
+    #[test]
+    fn lockstep_keeps_its_own_clock_rate_and_resets() {
+        let lockstep = ["teleop_node", "--source", "expert", "--lockstep"];
+        assert!(Args::try_parse_from(lockstep).unwrap().lockstep);
+        for other in [
+            ["--sim-time"].as_slice(),
+            &["--rate", "50"],
+            &["--no-reset"],
+        ] {
+            let argv = lockstep.iter().chain(other);
+            assert!(Args::try_parse_from(argv).is_err(), "{other:?}");
+        }
     }
 }

@@ -8,6 +8,7 @@
 pub mod cli;
 pub mod controls;
 pub mod input;
+pub mod lockstep;
 pub mod motion;
 pub mod node;
 pub mod parameters;

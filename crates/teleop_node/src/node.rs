@@ -15,6 +15,7 @@ use so101_core::{
         clock::SimClock, parameters::ParameterServer, qos, rate_limit::RateLimiter,
         shutdown::Shutdown, RosNode,
     },
+    task::CONTROL_RATE_HZ,
 };
 use so101_core::{expert::ExpertConfig, robot::follow};
 use so101_msgs::{
@@ -31,6 +32,7 @@ use crate::{
         expert::Expert, gamepad::Gamepad, keyboard::Keyboard, leader::Leader, scripted::Scripted,
         Request, Scene, Source, Tick,
     },
+    lockstep::{self, Lockstep, Taken},
     motion::{jog_cartesian, jog_joints, Mode, Speeds},
     parameters::{self, Tunables},
 };
@@ -66,9 +68,14 @@ impl Topics {
         })
     }
 
-    /// Takes everything that arrived: the arm's latest positions and the scene.
-    fn take(&self, measured: &mut Option<JointPositions>, scene: &mut Scene) {
+    /// Takes everything that arrived: the arm's latest positions and the scene. Returns what came
+    /// (a lockstep tick waits for all of a period's).
+    fn take(&self, measured: &mut Option<JointPositions>, scene: &mut Scene) -> Taken {
+        let mut taken = Taken::default();
         while let Ok(Some((message, _))) = self.joint_states.take() {
+            let stamp = message.header.stamp.as_secs_f64();
+            taken.joint_states += 1;
+            taken.newest_stamp = Some(taken.newest_stamp.map_or(stamp, |newest| newest.max(stamp)));
             if let Ok(targets) = targets_from_joint_state(&message.name, &message.position) {
                 if let Some(positions) = measured {
                     targets.apply_clamped(positions, &JOINT_LIMITS);
@@ -91,10 +98,13 @@ impl Topics {
                 ],
             ));
             scene.cube_messages += 1;
+            taken.cube_poses += 1;
         }
         while let Ok(Some((message, _))) = self.task_success.take() {
             scene.task_success = message.data;
+            taken.task_successes += 1;
         }
+        taken
     }
 
     fn publish_targets(&self, targets: &JointPositions) -> bool {
@@ -146,17 +156,21 @@ impl Topics {
     }
 }
 
-/// The node's clock: wall time since start, or sim time from /clock.
+/// The node's clock: wall time since start, sim time from /clock, or the stamps of the states a
+/// sim in lockstep answers each command with.
 enum Clock {
     Wall(Instant),
     Sim(SimClock),
+    Lockstep(Lockstep),
 }
 
 impl Clock {
+    /// Wall or sim time; lockstep's time comes with its gate (crate::lockstep).
     fn now(&self) -> Option<f64> {
         match self {
             Self::Wall(start) => Some(start.elapsed().as_secs_f64()),
             Self::Sim(clock) => clock.now().map(|time| time.to_nanos() as f64 * 1e-9),
+            Self::Lockstep(_) => None,
         }
     }
 }
@@ -239,12 +253,44 @@ fn next_targets(
     }
 }
 
+/// The time of the next tick on a wall or sim clock once it is due (None after a short wait
+/// while it is not), `next_tick` moved one period on.
+fn timed_tick(clock: &Clock, next_tick: &mut Option<f64>, period: f64) -> Option<f64> {
+    let Some(now) = clock.now() else {
+        std::thread::sleep(Duration::from_millis(5));
+        return None;
+    };
+    let due = *next_tick.get_or_insert(now);
+    if now + 1e-9 < due {
+        let wait = match clock {
+            // Sim time may run at any speed: look again soon.
+            Clock::Sim(_) => Duration::from_micros(500),
+            _ => Duration::from_secs_f64((due - now).min(0.005)),
+        };
+        std::thread::sleep(wait);
+        return None;
+    }
+    // A stall or a sim-time jump (forwards, or backwards when the sim restarted) is not
+    // followed by a burst of periods nor by a long silence.
+    *next_tick = Some(if (now - due).abs() > period {
+        now + period
+    } else {
+        due + period
+    });
+    Some(now)
+}
+
 /// Runs the node until a signal, a quit control, the source's end or --duration.
 pub fn run(args: Args) -> Result<()> {
     let shutdown = Shutdown::on_signals().context("cannot install the signal handlers")?;
     let mut node = RosNode::start("teleop_node", &args.node)?;
     let topics = Topics::connect(&mut node)?;
-    let clock = if args.sim_time {
+    if args.lockstep && args.source != SourceKind::Expert {
+        anyhow::bail!("--lockstep runs the expert source only (--source expert): a person cannot keep pace with a sim that waits for each command");
+    }
+    let mut clock = if args.lockstep {
+        Clock::Lockstep(Lockstep::default())
+    } else if args.sim_time {
         Clock::Sim(SimClock::subscribe(&mut node, shutdown.clone())?)
     } else {
         Clock::Wall(Instant::now())
@@ -252,7 +298,13 @@ pub fn run(args: Args) -> Result<()> {
     let mut source = open_source(&args, &mut node)?;
     let parameters = ParameterServer::start(&mut node, parameters::declarations(&args))?;
     let mut tunables = Tunables::from_args(&args);
-    let period = 1.0 / args.rate;
+    // In lockstep each command is one of the sim's control periods.
+    let period = 1.0
+        / if args.lockstep {
+            CONTROL_RATE_HZ
+        } else {
+            args.rate
+        };
     let started = Instant::now();
     let mut mode = args.mode;
     let mut recording = false;
@@ -262,7 +314,7 @@ pub fn run(args: Args) -> Result<()> {
     let mut next_tick: Option<f64> = None;
     let mut warnings = RateLimiter::new(Duration::from_secs(2));
     let mut waiting_logged = false;
-    tracing::info!(source = ?args.source, mode = ?mode, rate_hz = args.rate, sim_time = args.sim_time, "teleop ready");
+    tracing::info!(source = ?args.source, mode = ?mode, rate_hz = 1.0 / period, sim_time = args.sim_time, lockstep = args.lockstep, "teleop ready");
 
     'control: while !shutdown.is_requested() {
         if args
@@ -271,33 +323,39 @@ pub fn run(args: Args) -> Result<()> {
         {
             break;
         }
-        let Some(now) = clock.now() else {
-            std::thread::sleep(Duration::from_millis(5));
-            continue;
-        };
-        let due = *next_tick.get_or_insert(now);
-        if now + 1e-9 < due {
-            let wait = match clock {
-                Clock::Wall(_) => Duration::from_secs_f64((due - now).min(0.005)),
-                // Sim time may run at any speed: look again soon.
-                Clock::Sim(_) => Duration::from_micros(500),
-            };
-            std::thread::sleep(wait);
-            continue;
-        }
-        // A stall or a sim-time jump (forwards, or backwards when the sim restarted) is not
-        // followed by a burst of periods nor by a long silence.
-        next_tick = Some(if (now - due).abs() > period {
-            now + period
+        let now = if let Clock::Lockstep(lockstep) = &mut clock {
+            match lockstep.gate(topics.take(&mut measured, &mut scene), Instant::now()) {
+                lockstep::Gate::Tick(now) => now,
+                lockstep::Gate::TimedOut(now) => {
+                    tracing::warn!(
+                        timeouts = lockstep.timeouts,
+                        "a command's period did not come back (/joint_states, /cube/pose, /task/success): is the sim in --lockstep --step-on-command?"
+                    );
+                    now
+                }
+                lockstep::Gate::Wait => {
+                    std::thread::sleep(Duration::from_micros(200));
+                    continue;
+                }
+            }
         } else {
-            due + period
-        });
+            let Some(now) = timed_tick(&clock, &mut next_tick, period) else {
+                continue;
+            };
+            now
+        };
+        // In lockstep a tick that publishes no command steps nothing: the next one follows
+        // after a pause on the wall clock instead of at once.
+        let mut stepped = false;
 
         for change in parameters.changes() {
             tunables.apply(&change.name, &change.value);
         }
         topics.take(&mut measured, &mut scene);
         if started.elapsed() < DISCOVERY_GRACE {
+            if matches!(clock, Clock::Lockstep(_)) {
+                std::thread::sleep(lockstep::IDLE_TICK);
+            }
             continue;
         }
         if targets.is_none() {
@@ -325,7 +383,8 @@ pub fn run(args: Args) -> Result<()> {
                     &mut warnings,
                 );
                 targets = Some(next);
-                if !topics.publish_targets(&next) {
+                stepped = topics.publish_targets(&next);
+                if !stepped {
                     if let Some(suppressed) = warnings.check(Instant::now()) {
                         tracing::warn!(suppressed, "publishing /joint_commands failed");
                     }
@@ -341,7 +400,13 @@ pub fn run(args: Args) -> Result<()> {
         }
         for control in reading.controls {
             if let Some(text) = event_text(&control, recording) {
+                let opens_or_closes = text.starts_with("start") || text == "stop";
                 topics.publish_event(text);
+                if opens_or_closes && matches!(clock, Clock::Lockstep(_)) {
+                    // The sim stands still until the next command: a recorder that opens or
+                    // closes its episode meanwhile loses no period of it, nor takes one of the next.
+                    std::thread::sleep(lockstep::EVENT_PAUSE);
+                }
             }
             recording = recording_after(&control, recording);
             match control {
@@ -350,9 +415,15 @@ pub fn run(args: Args) -> Result<()> {
                         tracing::info!(%message, "sim reset");
                         // The arm starts the new episode at home: follow it from there.
                         targets = None;
-                        std::thread::sleep(Duration::from_millis(50));
-                        topics.take(&mut measured, &mut scene);
-                        measured = None;
+                        if matches!(clock, Clock::Lockstep(_)) {
+                            // Every earlier state was taken; the next one is the reset's.
+                            measured = None;
+                            stepped = true;
+                        } else {
+                            std::thread::sleep(Duration::from_millis(50));
+                            topics.take(&mut measured, &mut scene);
+                            measured = None;
+                        }
                     }
                     Err(reason) => {
                         scene.reset_failures += 1;
@@ -366,6 +437,13 @@ pub fn run(args: Args) -> Result<()> {
                 Control::Halt => tracing::info!("halt: holding"),
                 Control::Quit => break 'control,
                 _ => {}
+            }
+        }
+        if let Clock::Lockstep(lockstep) = &mut clock {
+            if stepped {
+                lockstep.stepped(Instant::now());
+            } else {
+                std::thread::sleep(lockstep::IDLE_TICK);
             }
         }
     }

@@ -73,6 +73,7 @@ pub fn declarations(args: &Args) -> Parameters {
         options.declare("mode", Value::choice(&args.mode)),
         options.declare("rate", Value::Double(args.rate)),
         options.declare("sim_time", Value::Bool(args.sim_time)),
+        options.declare("lockstep", Value::Bool(args.lockstep)),
         tunable("joint_speed", args.joint_speed, MAX_JOINT_SPEED),
         tunable("linear_speed", args.linear_speed, MAX_LINEAR_SPEED),
         tunable("angular_speed", args.angular_speed, MAX_ANGULAR_SPEED),

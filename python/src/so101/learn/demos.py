@@ -28,6 +28,7 @@ from pathlib import Path
 
 from .. import contract, sim_options
 from ..paths import repo_root
+from ..stack.launch_plan import LOCKSTEP
 
 REPO_ID = "local/so101_demos"
 
@@ -70,10 +71,26 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         "observation.ee_state (so101-bag-to-lerobot --action-space)",
     )
     sim_options.add_arguments(p)
-    p.add_argument("--speed", type=float, default=None, help="sim speed (default 8 without cameras, else 4)")
+    p.add_argument(
+        "--speed",
+        type=speed_value,
+        default=None,
+        help="sim speed (default 8 without cameras, else 4), or 'lockstep': the sim steps once per command of the "
+        "expert, which sees every period's state, so the recording repeats for one seed whatever the machine's load",
+    )
     p.add_argument("--keep-failures", action="store_true", help="keep episodes the expert failed")
     p.add_argument("--repo-id", default=REPO_ID, help="the dataset's repo id")
     p.add_argument("--output", default=None, help="directory for bags/, dataset/ and logs/ (default runs/demos-<time>/)")
+
+
+def speed_value(text: str) -> float | str:
+    """--speed: a factor of real time, or lockstep."""
+    if text == LOCKSTEP:
+        return text
+    try:
+        return float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is neither a factor of real time nor {LOCKSTEP!r}") from None
 
 
 def launch_command(args, output: Path) -> list[str]:
@@ -92,7 +109,7 @@ def launch_command(args, output: Path) -> list[str]:
         "--record",
         f"--bags={output / 'bags'}",
         f"--log-dir={output / 'logs'}",
-        f"--speed={speed:g}",
+        f"--speed={speed}" if speed == LOCKSTEP else f"--speed={speed:g}",
         f"--sim-args=--cameras {shlex.quote(args.cameras)}"
         + (" --lite" if args.lite else "")
         + f" --servo-params {shlex.quote(args.servo_params)} --randomize {shlex.quote(args.randomize)}"

@@ -251,7 +251,13 @@ def parser() -> argparse.ArgumentParser:
     p.add_argument("--host-network", action="store_true", help="do not isolate DDS in a private network namespace")
     sim = p.add_argument_group("sim")
     sim.add_argument("--lite", action="store_true", help="no meshes (renders ~5x faster on a CPU)")
-    sim.add_argument("--speed", default=None, help="sim speed (default: real time; 4 with the expert)")
+    sim.add_argument(
+        "--speed",
+        default=None,
+        help="sim speed (default: real time; 4 with the expert), or 'lockstep' with the expert: the sim steps once per "
+        "command and the expert waits for each period's state, so a recording repeats for one seed and runs as fast "
+        "as the machine goes",
+    )
     sim.add_argument("--sim-args", default="", help='more so101_sim_node flags in one string (--sim-args="--cameras top,wrist")')
     real = p.add_argument_group("real")
     real.add_argument("--port", default=None, help="the arm's servo bus, e.g. /dev/ttyACM0")

@@ -19,6 +19,8 @@ EMULATED_ARM_CALIBRATION = "emulated_arm/so101_calibration.json"  # under assets
 # JPEG quality of the recorded camera frames (docs/benchmarks.md, "Recording size": the best
 # fidelity within 10 MB per second of robot time for the three default cameras).
 DEFAULT_JPEG_QUALITY = 100
+# --speed's value that runs the sim in lockstep with the expert (each command one control period).
+LOCKSTEP = "lockstep"
 # What the recorder keeps by default with compressed cameras: recorder_node's default set
 # (crates/recorder_node/src/topics.rs DEFAULT_PATTERNS; a unit test holds the two together) with
 # the cameras' compressed topics in place of their raw images.
@@ -85,7 +87,11 @@ def plan(args) -> list[NodeSpec]:
             sim.append("--lite")
         if task != "cube_to_bin":
             sim += ["--task", task]
-        if args.speed:
+        if args.speed == LOCKSTEP:
+            if args.control != "expert":
+                raise SystemExit("so101-launch: --speed lockstep steps the sim once per command of the expert (--control expert)")
+            sim += ["--lockstep", "--step-on-command"]
+        elif args.speed:
             sim += ["--speed", args.speed]
         extra = shlex.split(args.sim_args)
         if args.record and not args.raw_images:
@@ -172,7 +178,8 @@ def plan(args) -> list[NodeSpec]:
         if args.control == "expert":
             if args.robot != "sim":
                 raise SystemExit("so101-launch: the scripted expert needs the sim (it reads /cube/pose)")
-            teleop += ["--source", "expert", "--sim-time", "--seed", str(args.seed), "--task", task_text]
+            clock = "--lockstep" if args.speed == LOCKSTEP else "--sim-time"
+            teleop += ["--source", "expert", clock, "--seed", str(args.seed), "--task", task_text]
             teleop += ["--sim-task", task]
             if args.episodes:
                 teleop += ["--episodes", str(args.episodes)]
