@@ -187,7 +187,15 @@ def test_sysid_recovers_the_emulated_arms_servo_parameters(tmp_path):
     for joint, result in held_out.items():
         index = contract.JOINT_NAMES.index(joint)
         before, after, exact = (result[str(m)]["rms_rad"][index] for m in models)
-        # The fit tracks the held-out motion as the truth does, far better than the preset.
+        # The fit tracks the held-out motion as the truth does, far better than the preset. The
+        # truth's own error is the recording's (the driver's cycle jitter: 0.0007 rad here, and
+        # 0.0115 in a CI run where a stall disturbed the held-out motion, the preset's 0.0128
+        # then mostly the same disturbance): a model's error beyond it, in quadrature, is what
+        # the servo model adds.
         tick = 2 * np.pi / contract.ENCODER_TICKS_PER_REVOLUTION
         assert after <= max(1.5 * exact, exact + 0.5 * tick), (joint, before, after, exact)
-        assert after <= 0.4 * before, (joint, before, after, exact)
+
+        def beyond_truth(error: float) -> float:
+            return float(np.sqrt(max(error**2 - exact**2, 0.0)))
+
+        assert beyond_truth(after) <= 0.4 * beyond_truth(before), (joint, before, after, exact)
