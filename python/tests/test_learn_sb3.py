@@ -15,6 +15,7 @@ from pathlib import Path
 import gymnasium as gym
 import numpy as np
 import pytest
+import torch
 
 from so101.envs import action_space, make_env, observation_space
 from so101.learn import cli, eval_recipe, sb3_sac
@@ -119,6 +120,13 @@ def test_bc_through_imitation_learns_from_expert_demos_and_so101_learn_eval_runs
     env = record["env"]
     assert env["observation"] == [*FLAT_KEYS, ELAPSED] and len(env["observation_shift"]) == 20
     assert all(scale > 0 for scale in env["observation_scale"])
+    # ReLU units from PyTorch's initialization: SB3's tanh and orthogonal start cloned a policy
+    # that stalled short of the grasp on the STS3215 servos (so101.learn.sb3_bc).
+    from stable_baselines3.common.policies import ActorCriticPolicy
+
+    saved = ActorCriticPolicy.load(str(output / record["model"]), device="cpu")
+    assert saved.activation_fn is torch.nn.ReLU and not saved.ortho_init
+    assert any(isinstance(layer, torch.nn.ReLU) for layer in saved.mlp_extractor.policy_net)
 
     assert eval_recipe.find_saved(str(output)) is not None and eval_recipe.find_saved(str(output / "policy.pth")) is not None
     assert cli.main(["eval", str(output), "--eval", "2", "--seed", "1000", "--output", str(tmp_path / "eval"), "--quiet"]) == 0

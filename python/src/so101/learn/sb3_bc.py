@@ -7,6 +7,11 @@ policy) on demonstrations of the scripted expert, all in-process, then an evalua
    of at most --max-step rad per period); the expert's targets become relative actions. Failed
    episodes are dropped (and counted).
 2. training: --epochs over the transitions, MLP --hidden (default 256 256), batch --batch-size.
+   The MLP's units are ReLUs and its weights start at PyTorch's default initialization, not SB3's
+   ActorCriticPolicy defaults (tanh units, orthogonal initialization): on the STS3215 servos,
+   whose ramps make the expert wait for the arm, the defaults' clone stalled short of the grasp in
+   every episode (0 of 20); ReLU alone 54 of 70, ReLU without the orthogonal start 64 of 70
+   (tuning seeds 1000-1069, docs/benchmarks.md).
 3. output (--output, default <checkout>/outputs/bc-<time>/): policy.pth (the SB3 policy, `policy.save`),
    so101_learn.json (task, wrappers' parameters, training settings), bc_log/ (imitation's log).
 4. evaluation: --eval seeded episodes from --eval-seed (other seeds than the demonstrations'),
@@ -146,6 +151,8 @@ def train(
         env.action_space,
         lr_schedule=lambda _: lr,  # unused: BC has its own optimizer
         net_arch=list(hidden),
+        activation_fn=torch.nn.ReLU,
+        ortho_init=False,
     )
     trainer = bc.BC(
         observation_space=env.observation_space,
