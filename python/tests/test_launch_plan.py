@@ -51,7 +51,7 @@ def test_raw_images_and_the_users_own_flags(binaries):
         launch.parser().parse_args(["--jpeg-quality", "0"])
 
 
-def test_lockstep_steps_the_sim_once_per_command_of_the_expert(binaries):
+def test_lockstep_steps_the_sim_once_per_command_of_the_expert(binaries, capsys):
     nodes = argv_of(["--control", "expert", "--speed", "lockstep"])
     sim, teleop = nodes["so101_sim_node"], nodes["teleop_node"]
     assert "--lockstep" in sim and "--step-on-command" in sim and "--speed" not in sim
@@ -62,6 +62,10 @@ def test_lockstep_steps_the_sim_once_per_command_of_the_expert(binaries):
     # A person cannot keep pace with a sim that waits for each command.
     with pytest.raises(SystemExit, match="lockstep"):
         argv_of(["--control", "teleop", "--speed", "lockstep"])
+    # Neither a factor nor lockstep: refused at the command line, before any node starts.
+    with pytest.raises(SystemExit):
+        launch.parser().parse_args(["--control", "expert", "--speed", "fast"])
+    assert "neither a factor of real time" in capsys.readouterr().err
 
 
 def test_the_compressed_set_is_recorder_nodes_default_set_with_compressed_cameras():

@@ -156,21 +156,25 @@ impl Topics {
     }
 }
 
-/// The node's clock: wall time since start, sim time from /clock, or the stamps of the states a
-/// sim in lockstep answers each command with.
+/// The node's clock: a timed one (ticks at --rate), or the stamps of the states a sim in
+/// lockstep answers each command with (crate::lockstep: a tick per period that came back).
 enum Clock {
-    Wall(Instant),
-    Sim(SimClock),
+    Timed(TimedClock),
     Lockstep(Lockstep),
 }
 
-impl Clock {
-    /// Wall or sim time; lockstep's time comes with its gate (crate::lockstep).
+/// Wall time since start, or sim time from /clock.
+enum TimedClock {
+    Wall(Instant),
+    Sim(SimClock),
+}
+
+impl TimedClock {
+    /// Seconds now; None until /clock has been heard.
     fn now(&self) -> Option<f64> {
         match self {
             Self::Wall(start) => Some(start.elapsed().as_secs_f64()),
             Self::Sim(clock) => clock.now().map(|time| time.to_nanos() as f64 * 1e-9),
-            Self::Lockstep(_) => None,
         }
     }
 }
@@ -255,7 +259,7 @@ fn next_targets(
 
 /// The time of the next tick on a wall or sim clock once it is due (None after a short wait
 /// while it is not), `next_tick` moved one period on.
-fn timed_tick(clock: &Clock, next_tick: &mut Option<f64>, period: f64) -> Option<f64> {
+fn timed_tick(clock: &TimedClock, next_tick: &mut Option<f64>, period: f64) -> Option<f64> {
     let Some(now) = clock.now() else {
         std::thread::sleep(Duration::from_millis(5));
         return None;
@@ -264,7 +268,7 @@ fn timed_tick(clock: &Clock, next_tick: &mut Option<f64>, period: f64) -> Option
     if now + 1e-9 < due {
         let wait = match clock {
             // Sim time may run at any speed: look again soon.
-            Clock::Sim(_) => Duration::from_micros(500),
+            TimedClock::Sim(_) => Duration::from_micros(500),
             _ => Duration::from_secs_f64((due - now).min(0.005)),
         };
         std::thread::sleep(wait);
@@ -291,10 +295,14 @@ pub fn run(args: Args) -> Result<()> {
     let mut clock = if args.lockstep {
         Clock::Lockstep(Lockstep::default())
     } else if args.sim_time {
-        Clock::Sim(SimClock::subscribe(&mut node, shutdown.clone())?)
+        Clock::Timed(TimedClock::Sim(SimClock::subscribe(
+            &mut node,
+            shutdown.clone(),
+        )?))
     } else {
-        Clock::Wall(Instant::now())
+        Clock::Timed(TimedClock::Wall(Instant::now()))
     };
+    let in_lockstep = matches!(clock, Clock::Lockstep(_));
     let mut source = open_source(&args, &mut node)?;
     let parameters = ParameterServer::start(&mut node, parameters::declarations(&args))?;
     let mut tunables = Tunables::from_args(&args);
@@ -323,26 +331,29 @@ pub fn run(args: Args) -> Result<()> {
         {
             break;
         }
-        let now = if let Clock::Lockstep(lockstep) = &mut clock {
-            match lockstep.gate(topics.take(&mut measured, &mut scene), Instant::now()) {
-                lockstep::Gate::Tick(now) => now,
-                lockstep::Gate::TimedOut(now) => {
-                    tracing::warn!(
+        let now = match &mut clock {
+            Clock::Lockstep(lockstep) => {
+                match lockstep.gate(topics.take(&mut measured, &mut scene), Instant::now()) {
+                    lockstep::Gate::Tick(now) => now,
+                    lockstep::Gate::TimedOut(now) => {
+                        tracing::warn!(
                         timeouts = lockstep.timeouts,
                         "a command's period did not come back (/joint_states, /cube/pose, /task/success): is the sim in --lockstep --step-on-command?"
                     );
-                    now
-                }
-                lockstep::Gate::Wait => {
-                    std::thread::sleep(Duration::from_micros(200));
-                    continue;
+                        now
+                    }
+                    lockstep::Gate::Wait => {
+                        std::thread::sleep(Duration::from_micros(200));
+                        continue;
+                    }
                 }
             }
-        } else {
-            let Some(now) = timed_tick(&clock, &mut next_tick, period) else {
-                continue;
-            };
-            now
+            Clock::Timed(timed) => {
+                let Some(now) = timed_tick(timed, &mut next_tick, period) else {
+                    continue;
+                };
+                now
+            }
         };
         // In lockstep a tick that publishes no command steps nothing: the next one follows
         // after a pause on the wall clock instead of at once.
@@ -353,7 +364,7 @@ pub fn run(args: Args) -> Result<()> {
         }
         topics.take(&mut measured, &mut scene);
         if started.elapsed() < DISCOVERY_GRACE {
-            if matches!(clock, Clock::Lockstep(_)) {
+            if in_lockstep {
                 std::thread::sleep(lockstep::IDLE_TICK);
             }
             continue;
@@ -402,7 +413,7 @@ pub fn run(args: Args) -> Result<()> {
             if let Some(text) = event_text(&control, recording) {
                 let opens_or_closes = text.starts_with("start") || text == "stop";
                 topics.publish_event(text);
-                if opens_or_closes && matches!(clock, Clock::Lockstep(_)) {
+                if opens_or_closes && in_lockstep {
                     // The sim stands still until the next command: a recorder that opens or
                     // closes its episode meanwhile loses no period of it, nor takes one of the next.
                     std::thread::sleep(lockstep::EVENT_PAUSE);
@@ -415,7 +426,7 @@ pub fn run(args: Args) -> Result<()> {
                         tracing::info!(%message, "sim reset");
                         // The arm starts the new episode at home: follow it from there.
                         targets = None;
-                        if matches!(clock, Clock::Lockstep(_)) {
+                        if in_lockstep {
                             // Every earlier state was taken; the next one is the reset's.
                             measured = None;
                             stepped = true;

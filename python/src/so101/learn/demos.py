@@ -28,7 +28,7 @@ from pathlib import Path
 
 from .. import contract, sim_options
 from ..paths import repo_root
-from ..stack.launch_plan import LOCKSTEP
+from ..stack.launch_plan import LOCKSTEP, speed_value
 
 REPO_ID = "local/so101_demos"
 
@@ -81,16 +81,6 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--keep-failures", action="store_true", help="keep episodes the expert failed")
     p.add_argument("--repo-id", default=REPO_ID, help="the dataset's repo id")
     p.add_argument("--output", default=None, help="directory for bags/, dataset/ and logs/ (default runs/demos-<time>/)")
-
-
-def speed_value(text: str) -> float | str:
-    """--speed: a factor of real time, or lockstep."""
-    if text == LOCKSTEP:
-        return text
-    try:
-        return float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"{text!r} is neither a factor of real time nor {LOCKSTEP!r}") from None
 
 
 def launch_command(args, output: Path) -> list[str]:

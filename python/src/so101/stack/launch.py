@@ -58,7 +58,7 @@ from ..paths import isolated_wrapper, node_environment
 from . import process as processes
 from . import record_session
 from .isolation import network_namespace_problem
-from .launch_plan import DEFAULT_JPEG_QUALITY, NodeSpec, check_session, plan
+from .launch_plan import DEFAULT_JPEG_QUALITY, NodeSpec, check_session, plan, speed_value
 
 
 @dataclass
@@ -253,6 +253,7 @@ def parser() -> argparse.ArgumentParser:
     sim.add_argument("--lite", action="store_true", help="no meshes (renders ~5x faster on a CPU)")
     sim.add_argument(
         "--speed",
+        type=speed_value,
         default=None,
         help="sim speed (default: real time; 4 with the expert), or 'lockstep' with the expert: the sim steps once per "
         "command and the expert waits for each period's state, so a recording repeats for one seed and runs as fast "
@@ -348,7 +349,7 @@ def main(argv: list[str] | None = None) -> int:
         isolated = str(isolated_wrapper())
         os.execv(isolated, [isolated, sys.executable, "-m", "so101.stack.launch", *argv])
     if args.speed is None and args.robot == "sim" and args.control == "expert":
-        args.speed = "4"  # every camera frame rendered; as fast as the renderer allows, up to 4x
+        args.speed = 4.0  # every camera frame rendered; as fast as the renderer allows, up to 4x
     args.log_dir = args.log_dir or f"logs/launch-{time.strftime('%Y%m%d-%H%M%S')}"
     log_dir = Path(args.log_dir)
     log_dir.mkdir(parents=True, exist_ok=True)

@@ -3,6 +3,7 @@ Pure (no process is started): so101.stack.launch runs the plan."""
 
 from __future__ import annotations
 
+import argparse
 import os
 import shlex
 import shutil
@@ -21,6 +22,18 @@ EMULATED_ARM_CALIBRATION = "emulated_arm/so101_calibration.json"  # under assets
 DEFAULT_JPEG_QUALITY = 100
 # --speed's value that runs the sim in lockstep with the expert (each command one control period).
 LOCKSTEP = "lockstep"
+
+
+def speed_value(text: str) -> float | str:
+    """--speed's value (so101-launch's and so101-learn demos'): a factor of real time, or LOCKSTEP."""
+    if text == LOCKSTEP:
+        return text
+    try:
+        return float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is neither a factor of real time nor {LOCKSTEP!r}") from None
+
+
 # What the recorder keeps by default with compressed cameras: recorder_node's default set
 # (crates/recorder_node/src/topics.rs DEFAULT_PATTERNS; a unit test holds the two together) with
 # the cameras' compressed topics in place of their raw images.
@@ -92,7 +105,7 @@ def plan(args) -> list[NodeSpec]:
                 raise SystemExit("so101-launch: --speed lockstep steps the sim once per command of the expert (--control expert)")
             sim += ["--lockstep", "--step-on-command"]
         elif args.speed:
-            sim += ["--speed", args.speed]
+            sim += ["--speed", f"{args.speed:g}"]
         extra = shlex.split(args.sim_args)
         if args.record and not args.raw_images:
             # The JPEG frames the recorder keeps (the raw ones are still published for live peers).
