@@ -37,6 +37,10 @@ def write_script(path: Path, lines: list[dict]) -> Path:
     return path
 
 
+# A joint moving more than this between two consecutive states jumped (a sim reset), rad.
+TELEPORT_RAD = 0.5
+
+
 def commands_inbox(ros, name: str = "/joint_commands"):
     from sensor_msgs.msg import JointState
 
@@ -310,11 +314,13 @@ def test_the_expert_puts_the_cube_in_the_bin_in_seeded_episodes_and_the_recorder
     sim_factory, teleop_factory, recorder_factory, ros, tmp_path
 ):
     from recorder_harness import episode_dirs, load_metadata, mcap_files, read_bag
+    from sensor_msgs.msg import JointState
     from std_msgs.msg import String
 
     sim = sim_factory("--speed", "3", "--seed", "11")
     recorder = recorder_factory()
     events = ros.subscribe("/episode/events", String, reliable_qos(1000))
+    states = ros.subscribe("/joint_states", JointState, best_effort_qos())
     ros.wait_for_graph(
         lambda: ros.node.count_subscribers("/episode/events") >= 2, 20.0, "the recorder's /episode/events subscription", sim
     )
@@ -343,6 +349,18 @@ def test_the_expert_puts_the_cube_in_the_bin_in_seeded_episodes_and_the_recorder
     assert len(starts) == episodes and all(json.loads(t[6:])["task"] == "put the cube in the bin" for t in starts), texts
     assert texts.count("stop") == episodes
     assert texts.count("success") == result["successes"]
+    # Each reset came a moment after the episode's stop, time for the recorder to close the episode
+    # before the arm jumps home (right after it, the reset pose became 15 of 100 bags' last state).
+    stops = [at for at, m in events.items() if m.data == "stop"]
+    arrived = states.items()
+    jumps = [
+        at
+        for (_, before), (at, after) in zip(arrived, arrived[1:])
+        if max(abs(a - b) for a, b in zip(after.position[:5], before.position[:5])) > TELEPORT_RAD
+    ]
+    for stop in stops[:-1]:  # the last episode ends the run: no reset follows it
+        reset = next(at for at in jumps if at > stop)
+        assert reset - stop > 0.15, f"the sim reset {reset - stop:.3f} s after a stop event"
     # Every episode started from another cube pose (the sim's seeded resets).
     cubes = [tuple(r["cube"][:2]) for r in result["results"]]
     assert len({(round(x, 3), round(y, 3)) for x, y in cubes}) == episodes, cubes
@@ -362,6 +380,8 @@ def test_the_expert_puts_the_cube_in_the_bin_in_seeded_episodes_and_the_recorder
         assert custom["success"] == str(outcome["success"]).lower(), (directory.name, custom, outcome)
         assert (custom["task"], custom["seed"]) == (announced["task"], str(announced["seed"])), custom
         bag = read_bag(mcap_files(directory)[0])
+        last, before_last = (m.ros.position[:5] for m in bag.on("/joint_states")[:-3:-1])
+        assert max(abs(a - b) for a, b in zip(last, before_last)) < TELEPORT_RAD, f"{directory.name} ends at the reset pose"
         commands = bag.on("/joint_commands")
         # About 380 on a quiet machine (7.6 s at 50 Hz); a busy one can skip periods.
         assert len(commands) > 50, f"{directory.name}: {len(commands)} joint_commands (about 7.6 s at 50 Hz expected)"

@@ -45,6 +45,10 @@ const RESET_ATTEMPTS: u32 = 3;
 /// running (a recorder waiting for /episode/events) takes a moment, and what is sent before
 /// they are matched is lost.
 const DISCOVERY_GRACE: Duration = Duration::from_millis(1500);
+/// Wall time between a "stop" event and the next sim reset: the recorder takes events on another
+/// thread than /joint_states, and a reset right after the stop put the reset pose into the closing
+/// episode as its last frame (15 of 100 stack demonstrations at 8x real time).
+const STOP_BEFORE_RESET: Duration = Duration::from_millis(250);
 
 /// The node's side of the topic contract.
 struct Topics {
@@ -322,6 +326,8 @@ pub fn run(args: Args) -> Result<()> {
     let mut next_tick: Option<f64> = None;
     let mut warnings = RateLimiter::new(Duration::from_secs(2));
     let mut waiting_logged = false;
+    // When the last "stop" event went out (STOP_BEFORE_RESET).
+    let mut stopped_at: Option<Instant> = None;
     tracing::info!(source = ?args.source, mode = ?mode, rate_hz = 1.0 / period, sim_time = args.sim_time, lockstep = args.lockstep, "teleop ready");
 
     'control: while !shutdown.is_requested() {
@@ -412,6 +418,9 @@ pub fn run(args: Args) -> Result<()> {
         for control in reading.controls {
             if let Some(text) = event_text(&control, recording) {
                 let opens_or_closes = text.starts_with("start") || text == "stop";
+                if text == "stop" {
+                    stopped_at = Some(Instant::now());
+                }
                 topics.publish_event(text);
                 if opens_or_closes && in_lockstep {
                     // The sim stands still until the next command: a recorder that opens or
@@ -421,26 +430,31 @@ pub fn run(args: Args) -> Result<()> {
             }
             recording = recording_after(&control, recording);
             match control {
-                Control::ResetSim => match topics.reset_sim(&shutdown) {
-                    Ok(message) => {
-                        tracing::info!(%message, "sim reset");
-                        // The arm starts the new episode at home: follow it from there.
-                        targets = None;
-                        if in_lockstep {
-                            // Every earlier state was taken; the next one is the reset's.
-                            measured = None;
-                            stepped = true;
-                        } else {
-                            std::thread::sleep(Duration::from_millis(50));
-                            topics.take(&mut measured, &mut scene);
-                            measured = None;
+                Control::ResetSim => {
+                    if let Some(at) = stopped_at.take() {
+                        std::thread::sleep(STOP_BEFORE_RESET.saturating_sub(at.elapsed()));
+                    }
+                    match topics.reset_sim(&shutdown) {
+                        Ok(message) => {
+                            tracing::info!(%message, "sim reset");
+                            // The arm starts the new episode at home: follow it from there.
+                            targets = None;
+                            if in_lockstep {
+                                // Every earlier state was taken; the next one is the reset's.
+                                measured = None;
+                                stepped = true;
+                            } else {
+                                std::thread::sleep(Duration::from_millis(50));
+                                topics.take(&mut measured, &mut scene);
+                                measured = None;
+                            }
+                        }
+                        Err(reason) => {
+                            scene.reset_failures += 1;
+                            tracing::warn!(%reason, "/sim/reset failed");
                         }
                     }
-                    Err(reason) => {
-                        scene.reset_failures += 1;
-                        tracing::warn!(%reason, "/sim/reset failed");
-                    }
-                },
+                }
                 Control::ToggleMode => {
                     mode = mode.toggled();
                     tracing::info!(mode = ?mode, "mode");
