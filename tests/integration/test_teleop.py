@@ -41,6 +41,11 @@ def write_script(path: Path, lines: list[dict]) -> Path:
 TELEPORT_RAD = 0.5
 
 
+def jumped(before, after) -> bool:
+    """Whether an arm joint moved more than TELEPORT_RAD between two consecutive JointStates."""
+    return max(abs(a - b) for a, b in zip(after.position[:5], before.position[:5])) > TELEPORT_RAD
+
+
 def commands_inbox(ros, name: str = "/joint_commands"):
     from sensor_msgs.msg import JointState
 
@@ -353,13 +358,10 @@ def test_the_expert_puts_the_cube_in_the_bin_in_seeded_episodes_and_the_recorder
     # before the arm jumps home (right after it, the reset pose became 15 of 100 bags' last state).
     stops = [at for at, m in events.items() if m.data == "stop"]
     arrived = states.items()
-    jumps = [
-        at
-        for (_, before), (at, after) in zip(arrived, arrived[1:])
-        if max(abs(a - b) for a, b in zip(after.position[:5], before.position[:5])) > TELEPORT_RAD
-    ]
+    jumps = [at for (_, before), (at, after) in zip(arrived, arrived[1:]) if jumped(before, after)]
     for stop in stops[:-1]:  # the last episode ends the run: no reset follows it
-        reset = next(at for at in jumps if at > stop)
+        reset = next((at for at in jumps if at > stop), None)
+        assert reset is not None, f"no jump of the arm to its reset pose after the stop at {stop:.3f}"
         assert reset - stop > 0.15, f"the sim reset {reset - stop:.3f} s after a stop event"
     # Every episode started from another cube pose (the sim's seeded resets).
     cubes = [tuple(r["cube"][:2]) for r in result["results"]]
@@ -380,8 +382,8 @@ def test_the_expert_puts_the_cube_in_the_bin_in_seeded_episodes_and_the_recorder
         assert custom["success"] == str(outcome["success"]).lower(), (directory.name, custom, outcome)
         assert (custom["task"], custom["seed"]) == (announced["task"], str(announced["seed"])), custom
         bag = read_bag(mcap_files(directory)[0])
-        last, before_last = (m.ros.position[:5] for m in bag.on("/joint_states")[:-3:-1])
-        assert max(abs(a - b) for a, b in zip(last, before_last)) < TELEPORT_RAD, f"{directory.name} ends at the reset pose"
+        before_last, last = (m.ros for m in bag.on("/joint_states")[-2:])
+        assert not jumped(before_last, last), f"{directory.name} ends at the reset pose"
         commands = bag.on("/joint_commands")
         # About 380 on a quiet machine (7.6 s at 50 Hz); a busy one can skip periods.
         assert len(commands) > 50, f"{directory.name}: {len(commands)} joint_commands (about 7.6 s at 50 Hz expected)"
