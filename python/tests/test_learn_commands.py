@@ -6,6 +6,7 @@ from __future__ import annotations
 import argparse
 import json
 import shutil
+import sys
 from pathlib import Path
 
 import pytest
@@ -72,7 +73,8 @@ def test_lerobot_train_gets_the_whole_preset_and_extra_arguments_last(recipe, tm
     dataset = tmp_path / "my_demos"
     args = parse(recipe, "--dataset", str(dataset), "--steps", "50", "--policy-arg=--policy.foo=1")
     command = lerobot_train.train_command(args, tmp_path / "out")
-    assert Path(command[0]).name == "lerobot-train"
+    # A dataset without cameras: lerobot-train, its items kept in memory.
+    assert command[:3] == [sys.executable, "-m", "so101.learn.train_in_memory"]
     assert f"--policy.type={recipe}" in command and "--policy.device=cpu" in command
     for key, value in lerobot_train.PRESETS[recipe]["policy"].items():
         assert f"--policy.{key}={value}" in command
@@ -167,17 +169,47 @@ def test_several_processes_train_through_accelerates_launcher(tmp_path):
     assert Path(command[0]).name == "accelerate" and command[1] == "launch"
     assert "--num_processes=2" in command
     module = command.index("-m")
-    assert command[module + 1] == "lerobot.scripts.lerobot_train"
+    assert command[module + 1] == "so101.learn.train_in_memory"
     # lerobot-train's own arguments follow unchanged, the extra ones last.
     assert "--policy.type=act" in command[module:] and command[-1] == "--policy.foo=1"
     # A rendezvous port of its own (two trainings never join one group), no forked loader on the CPU.
     ports = [int(arg.split("=")[1]) for arg in command if arg.startswith("--main_process_port=")]
     assert len(ports) == 1 and ports[0] > 0 and "--num_workers=0" in command
-    assert Path(lerobot_train.train_command(parse("act", "--dataset", str(tmp_path)), tmp_path)[0]).name == "lerobot-train"
+    assert lerobot_train.train_command(parse("act", "--dataset", str(tmp_path)), tmp_path)[1:3] == [
+        "-m",
+        "so101.learn.train_in_memory",
+    ]
+    cameras = camera_dataset(tmp_path / "cameras")
+    command = lerobot_train.train_command(parse("act", "--dataset", str(cameras), "--num-processes", "2"), tmp_path / "out")
+    assert command[command.index("-m") + 1] == "lerobot.scripts.lerobot_train"
+
+
+def camera_dataset(root: Path) -> Path:
+    """A dataset's meta/info.json with joints and one camera."""
+    state = {"observation.state": {"dtype": "float32", "shape": [6]}, "action": {"dtype": "float32", "shape": [6]}}
+    write_info(root, {**state, "observation.images.top": {"dtype": "video", "shape": [72, 96, 3]}})
+    return root
+
+
+def test_a_dataset_without_cameras_keeps_its_items_in_memory_unless_told(tmp_path):
+    state = tmp_path / "state"
+    write_info(state, {"observation.state": {"dtype": "float32", "shape": [6]}, "action": {"dtype": "float32", "shape": [6]}})
+    kept = lerobot_train.train_command(parse("diffusion", "--dataset", str(state)), tmp_path / "o")
+    # In memory: no loader process (it would keep copies of its own).
+    assert kept[:3] == [sys.executable, "-m", "so101.learn.train_in_memory"] and "--num_workers=0" in kept
+    reread = lerobot_train.train_command(parse("diffusion", "--dataset", str(state), "--reread-items"), tmp_path / "o")
+    assert Path(reread[0]).name == "lerobot-train" and "--num_workers=1" in reread
+    # The rest of the command is the same.
+    assert [a for a in kept[3:] if not a.startswith("--num_workers")] == [
+        a for a in reread[1:] if not a.startswith("--num_workers")
+    ]
+    cameras = lerobot_train.train_command(parse("act", "--dataset", str(camera_dataset(tmp_path / "cameras"))), tmp_path / "o")
+    assert Path(cameras[0]).name == "lerobot-train" and "--num_workers=1" in cameras
 
 
 def test_a_gpu_gets_more_loader_processes_than_the_cpu(tmp_path, monkeypatch):
     monkeypatch.setattr("os.cpu_count", lambda: 16)
+    tmp_path = camera_dataset(tmp_path / "cameras")
     workers = {
         device: next(
             a
@@ -210,13 +242,14 @@ def test_demos_record_in_parallel_only_in_process(tmp_path):
 
 
 def interrupted_run(tmp_path: Path, policy_type: str = "act", step: int = 200, processes: int = 1) -> Path:
-    """An output directory as lerobot-train leaves it after its checkpoint of `step` (the
+    """An output directory as lerobot-train leaves it after its checkpoint of `step` on a camera dataset (the
     checkpoints/last link, train_config.json and training_step.json; no weights, no process)."""
     output = tmp_path / "run"
     checkpoint = output / "checkpoints" / f"{step:06d}"
     (checkpoint / "pretrained_model").mkdir(parents=True)
     (checkpoint / "training_state").mkdir()
     (output / "checkpoints" / "last").symlink_to(checkpoint.name)
+    camera_dataset(tmp_path / "data")
     config = {
         "policy": {"type": policy_type, "device": "cpu"},
         "dataset": {"root": str(tmp_path / "data")},

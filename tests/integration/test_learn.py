@@ -133,6 +133,32 @@ def test_an_interrupted_training_resumes_to_the_weights_of_an_uninterrupted_one(
     assert any(not halfway[name].equal(resumed[name]) for name in resumed)
 
 
+def test_items_kept_in_memory_train_the_very_weights_of_items_read_at_every_step(demos, tmp_path):
+    """A dataset without cameras keeps its items in memory after their first read
+    (so101.learn.train_in_memory): over two passes through the demonstrations, training gives the
+    weights lerobot-train itself gives reading every item at every step (--reread-items), both
+    loading in the step. (A loader process alone changes lerobot-train's weights from the same
+    seed: every tensor differed after 25 steps.)"""
+    from lerobot.datasets.lerobot_dataset import LeRobotDataset
+    from safetensors.torch import load_file
+
+    frames = LeRobotDataset("local/demos", root=demos).num_frames
+    batch = 64
+    steps = 2 * frames // batch + 1
+    tiny = ["--policy.down_dims=[16,32,64]", "--policy.diffusion_step_embed_dim=16"]
+    argv = ["diffusion", "--dataset", str(demos), "--steps", str(steps), "--batch-size", str(batch), "--eval", "0"]
+    argv += [f"--policy-arg={arg}" for arg in tiny]
+    weights, logs = {}, {}
+    for way, extra in (("memory", []), ("reread", ["--reread-items", "--loader-workers", "0"])):
+        done = learn(*argv, *extra, "--output", str(tmp_path / way), timeout=300)
+        logs[way] = done.stdout + done.stderr
+        weights[way] = load_file(tmp_path / way / "checkpoints" / "last" / "pretrained_model" / "model.safetensors")
+    assert "-m so101.learn.train_in_memory" in logs["memory"] and "items is kept in memory" in logs["memory"]
+    assert "bin/lerobot-train " in logs["reread"] and "kept in memory" not in logs["reread"]
+    differing = [name for name in weights["memory"] if not weights["memory"][name].equal(weights["reread"][name])]
+    assert weights["memory"].keys() == weights["reread"].keys() and not differing, differing
+
+
 def assert_actions_within_the_samplers_clip_range(checkpoint: Path, config: dict, dataset: Path) -> None:
     """Diffusion's sampler clips every denoised action chunk to +-clip_sample_range in normalised
     units: LeRobot's own preprocessor, as saved with the policy, must put the demonstrations'

@@ -3,13 +3,16 @@
 runs it) for a few steps per variant, read from LeRobot's own log of each window of steps:
 data_s, the wait for the batch (the loader's reading, video decoding and augmentation, then the
 preprocessor), against updt_s, the model's step (forward, backward, optimizer). The first
-window is left out (start-up). The anchor, in the same run: the recipe's own settings, as a ratio
+window is left out (start-up; --skip leaves out more, e.g. a first pass through a dataset whose
+items stay in memory after it). The anchor, in the same run: the recipe's own settings, as a ratio
 of the step time.
 
 Variants, each a lever of the recipe reachable from its command line:
 - one-thread: one torch thread (--torch-threads 1) instead of torch's default (every core);
 - inline-loading: the batch loaded in the step (--loader-workers 0): no loader process, so data_s is the whole cost of
   reading and decoding a batch;
+- reread-items: every item read from the dataset at every step, with a loader process beside the step (--reread-items:
+  lerobot-train's own loading; by default a dataset without cameras keeps its items in memory);
 - bf16-autocast: bf16 autocast (--policy-arg=--policy.use_amp=true: LeRobot's mixed precision through accelerate).
 channels_last and torch.compile are not among them: lerobot-train has no option for either.
 
@@ -35,6 +38,7 @@ VARIANTS = {
     "one-thread": ["--torch-threads", "1"],
     "inline-loading": ["--loader-workers", "0"],
     "bf16-autocast": ["--policy-arg=--policy.use_amp=true"],
+    "reread-items": ["--reread-items"],
 }
 # LeRobot's MetricsTracker line, e.g. "... updt_s:2.871 data_s:0.012".
 WINDOW = re.compile(r"updt_s:([0-9.]+) data_s:([0-9.]+)")
@@ -45,11 +49,11 @@ def windows(log: str) -> list[tuple[float, float]]:
     return [(float(update), float(data)) for update, data in WINDOW.findall(log)]
 
 
-def profile(log: str) -> dict:
-    """The mean model step and batch wait (s) over the windows after the first."""
-    measured = windows(log)[1:]
+def profile(log: str, skip: int = 1) -> dict:
+    """The mean model step and batch wait (s) over the windows after the first `skip`."""
+    measured = windows(log)[skip:]
     if not measured:
-        raise ValueError("lerobot-train logged fewer than two windows of steps: raise --steps")
+        raise ValueError(f"lerobot-train logged no more than {skip} window(s) of steps: raise --steps")
     update = sum(u for u, _ in measured) / len(measured)
     data = sum(d for _, d in measured) / len(measured)
     return {"windows": len(measured), "update_s": update, "data_s": data, "step_s": update + data}
@@ -65,7 +69,7 @@ def run_variant(args, extra: list[str], output: Path) -> tuple[dict, float]:
     log = done.stdout + done.stderr
     if done.returncode != 0:
         raise SystemExit(f"so101-bench train_step: {' '.join(command + extra)} failed:\n{log[-3000:]}")
-    return profile(log), wall
+    return profile(log, args.skip), wall
 
 
 def run(args) -> int:
@@ -100,6 +104,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--dataset", type=Path, required=True, help="the LeRobot dataset the recipe trains on")
     p.add_argument("--policy", choices=["act", "diffusion"], default="act", help="the recipe")
     p.add_argument("--steps", type=int, default=40, help="steps per variant (logged in windows of a tenth)")
+    p.add_argument("--skip", type=int, default=1, help="windows left out at the start (default 1: start-up)")
     p.add_argument("--variant", action="append", choices=list(VARIANTS), help="measure only these (repeatable; default: all)")
 
 

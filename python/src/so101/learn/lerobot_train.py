@@ -14,12 +14,15 @@ Why these settings (LeRobot's defaults are sized for images on a GPU: 28 s a ste
   miss by millimetres), learning rate 1e-4 annealed to zero (cosine) over 1,500 steps.
 - Diffusion: a U-Net of (64, 128, 256) channels instead of (512, 1024, 2048) (the state is 13
   numbers, not image features), a horizon of 16 with 8 actions executed, DDIM with 10 inference
-  steps (DDPM's 100 steps make each chunk 10x slower to infer on a CPU), 6,000 steps: each step
-  trains one noise level of a chunk, and success was 13 / 67 / 90 % at 2,000 / 4,000 / 6,000.
+  steps (DDPM's 100 steps make each chunk 10x slower to infer on a CPU), 12,000 steps: each step
+  trains one noise level of a chunk; on the STS3215 servos success on tuning seeds was 72 % at
+  6,000 steps and 91 % at 12,000 (50 demonstrations; docs/benchmarks.md).
 - ACT: every input normalised by its dataset mean and std, the cube's pose too (its z of ~0.77 m
   and a quaternion would otherwise dwarf the joints). Diffusion: joints and actions by min-max
   (NORMALIZE_DIFFUSION says why), the cube's pose by mean and std.
 - With cameras (VISION): the backbone from scratch and colour augmentation only.
+- Without cameras, lerobot-train runs through so101.learn.train_in_memory: each item is read
+  once and kept, where reading it each step took twice the model's time (--reread-items: not).
 --policy-arg passes anything else to lerobot-train (e.g. --policy-arg=--policy.dim_model=512).
 """
 
@@ -88,7 +91,8 @@ PRESETS: dict[str, dict] = {
             "noise_scheduler_type": "DDIM",
             "num_inference_steps": 10,
         },
-        "steps": 6000,
+        # About 60 passes over 50 demonstrations (6,000: 72 % on tuning seeds, 12,000: 91 %).
+        "steps": 12000,
         "batch_size": 64,
     },
 }
@@ -172,6 +176,12 @@ def add_arguments(p: argparse.ArgumentParser, name: str) -> None:
         help="dataset loader processes per training process (default 1 on the CPU, where they share the cores with "
         "the step; with --device cuda up to 8, as the CPU's cores allow: a GPU waits on decoding otherwise)",
     )
+    p.add_argument(
+        "--reread-items",
+        action="store_true",
+        help="read each item from the dataset at every step, as lerobot-train does; by default a dataset without "
+        "cameras keeps its items in memory after their first read (so101.learn.train_in_memory)",
+    )
     p.add_argument("--seed", type=int, default=None, help="training seed (default 1000)")
     p.add_argument(
         "--torch-threads",
@@ -227,7 +237,6 @@ def train_command(args, output: Path) -> list[str]:
     resolve_length(args)
     dataset = Path(args.dataset).resolve()
     command = [
-        str(Path(sys.executable).with_name("lerobot-train")),
         f"--dataset.repo_id=local/{dataset.name}",
         f"--dataset.root={dataset}",
         f"--policy.type={args.policy_type}",
@@ -247,9 +256,8 @@ def train_command(args, output: Path) -> list[str]:
 
 
 def with_run_settings(command: list[str], args, output: Path) -> list[str]:
-    """A lerobot-train command completed with the run's length, checkpoints, seed, loaders, output
-    and the user's --policy-arg, launched through accelerate for several processes (every recipe
-    that trains with lerobot-train)."""
+    """lerobot-train's arguments completed with the run's length, checkpoints, seed, loaders,
+    output and the user's --policy-arg, launched (every recipe that trains with lerobot-train)."""
     command = command + [
         f"--steps={args.steps}",
         f"--batch_size={args.batch_size}",
@@ -264,18 +272,43 @@ def with_run_settings(command: list[str], args, output: Path) -> list[str]:
     return launched(command, args)
 
 
-def launched(command: list[str], args) -> list[str]:
-    """A lerobot-train command as it runs: itself, or for several processes the same arguments to
-    lerobot-train's module in each process accelerate launches."""
-    return launcher(args) + command[1:] if args.num_processes > 1 else command
+LEROBOT_TRAIN = "lerobot.scripts.lerobot_train"
+IN_MEMORY_TRAIN = "so101.learn.train_in_memory"
+
+
+def items_in_memory(args) -> bool:
+    """Whether the run keeps its dataset's items in memory (so101.learn.train_in_memory): ACT's or
+    Diffusion's (a VLA's dataset has cameras) on a dataset without cameras, unless --reread-items."""
+    return args.policy_type in PRESETS and not args.reread_items and not has_cameras(Path(args.dataset))
+
+
+def trainer_module(args) -> str:
+    """The module that trains: lerobot-train's own, or the same keeping a state dataset's items in
+    memory (a Diffusion step on 50 demonstrations: 3x faster on this CPU, docs/benchmarks.md)."""
+    return IN_MEMORY_TRAIN if items_in_memory(args) else LEROBOT_TRAIN
+
+
+def launched(arguments: list[str], args) -> list[str]:
+    """lerobot-train's arguments as they run: after lerobot-train (or the in-memory module), or
+    after the module in each process accelerate launches for several processes."""
+    module = trainer_module(args)
+    if args.num_processes > 1:
+        return launcher(args, module) + arguments
+    if module == LEROBOT_TRAIN:
+        return [str(Path(sys.executable).with_name("lerobot-train")), *arguments]
+    return [sys.executable, "-m", module, *arguments]
 
 
 def loader_workers(args) -> int:
     """On the CPU one loader process beside the training overlaps reading the next batch with the
     step; a GPU's step is short enough that decoding is the bottleneck (measured on an H100: 14.7
-    steps/s bound by loading, 34 ms for the model step), so it gets as many as the cores allow."""
+    steps/s bound by loading, 34 ms for the model step), so it gets as many as the cores allow.
+    Items kept in memory need none: each is read once, then costs nothing (a loader process would
+    keep copies of its own)."""
     if args.loader_workers is not None:
         return args.loader_workers
+    if items_in_memory(args):
+        return 0
     if args.device.startswith("cuda"):
         return max(1, min(8, (os.cpu_count() or 2) // max(1, args.num_processes) - 1))
     # Several CPU processes share the cores already, and a loader forked from a process whose
@@ -292,8 +325,8 @@ def free_port() -> int:
         return probe.getsockname()[1]
 
 
-def launcher(args) -> list[str]:
-    """accelerate launch with N processes running lerobot-train's module: LeRobot's multi-GPU
+def launcher(args, module: str) -> list[str]:
+    """accelerate launch with N processes running lerobot-train's `module`: LeRobot's multi-GPU
     training (one process per GPU), or processes on the CPU (gloo) where no GPU is named."""
     accelerate = str(Path(sys.executable).with_name("accelerate"))
     return [
@@ -312,7 +345,7 @@ def launcher(args) -> list[str]:
         "--mixed_precision=no",
         "--dynamo_backend=no",
         "-m",
-        "lerobot.scripts.lerobot_train",
+        module,
     ]
 
 
@@ -399,7 +432,6 @@ def resume_command(args, checkpoint: Checkpoint, output: Path) -> list[str]:
     """lerobot-train resuming `checkpoint` into the run's own directory, with the settings a run
     takes on each start given again (length, device, loaders, processes, --policy-arg)."""
     command = [
-        str(Path(sys.executable).with_name("lerobot-train")),
         f"--config_path={checkpoint.config_file}",
         "--resume=true",
         f"--output_dir={output}",

@@ -24,7 +24,6 @@ import argparse
 import json
 import os
 import subprocess
-import sys
 import time
 from pathlib import Path
 
@@ -146,7 +145,6 @@ def train_command(args, output: Path, renames: dict[str, str]) -> list[str]:
     else:
         start = [f"--policy.type={args.policy_type}", f"--policy.pretrained_path={args.pretrained}"]
     command = [
-        str(Path(sys.executable).with_name("lerobot-train")),
         *start,
         f"--dataset.repo_id=local/{dataset.name}",
         f"--dataset.root={dataset}",

@@ -1,0 +1,57 @@
+"""so101.learn.train_in_memory: a dataset without cameras is read once per item, then served from
+memory, and is otherwise the dataset it wraps (lerobot-train reads its meta, episodes, ...)."""
+
+from __future__ import annotations
+
+import pickle
+from types import SimpleNamespace
+
+import torch
+
+from so101.learn.train_in_memory import ItemsInMemory, keeps_items, with_items_in_memory
+
+
+class CountingDataset(torch.utils.data.Dataset):
+    """Items made of tensors, each read counted; cameras as LeRobotDataset's meta lists them."""
+
+    def __init__(self, size: int, camera_keys: list[str]) -> None:
+        self.reads = [0] * size
+        self.meta = SimpleNamespace(camera_keys=camera_keys)
+        self.num_frames = size
+
+    def __len__(self) -> int:
+        return len(self.reads)
+
+    def __getitem__(self, index: int) -> dict:
+        self.reads[index] += 1
+        return {"action": torch.full((16, 6), float(index)), "task": "put the cube in the bin"}
+
+
+def test_each_item_is_read_once_then_served_from_memory():
+    dataset = CountingDataset(5, [])
+    kept = ItemsInMemory(dataset)
+    loader = torch.utils.data.DataLoader(kept, batch_size=2, shuffle=True)
+    epochs = [torch.cat([batch["action"][:, 0, 0] for batch in loader]) for _ in range(3)]
+    assert dataset.reads == [1] * 5
+    for values in epochs:
+        assert sorted(values.tolist()) == [0.0, 1.0, 2.0, 3.0, 4.0]
+    # A consumer that replaces a key changes its own copy, not the kept item.
+    kept[3]["action"] = None
+    assert kept[3]["action"][0, 0] == 3.0 and dataset.reads[3] == 1
+
+
+def test_the_wrapper_is_the_dataset_it_wraps_but_for_its_items():
+    dataset = CountingDataset(4, [])
+    kept = ItemsInMemory(dataset)
+    assert len(kept) == 4 and kept.num_frames == 4 and kept.meta is dataset.meta
+    # A spawned loader process gets a copy by pickling.
+    copy = pickle.loads(pickle.dumps(kept))
+    assert copy.num_frames == 4 and float(copy[2]["action"][0, 0]) == 2.0
+
+
+def test_only_a_dataset_without_cameras_is_kept():
+    state, cameras = CountingDataset(3, []), CountingDataset(3, ["observation.images.top"])
+    assert keeps_items(state) and not keeps_items(cameras)
+    make = with_items_in_memory(lambda cfg: ({"state": state, "cameras": cameras}[cfg], None))
+    assert isinstance(make("state")[0], ItemsInMemory)
+    assert make("cameras")[0] is cameras
