@@ -241,7 +241,7 @@ def test_demos_record_in_parallel_only_in_process(tmp_path):
         demos.run(args)
 
 
-def interrupted_run(tmp_path: Path, policy_type: str = "act", step: int = 200, processes: int = 1) -> Path:
+def interrupted_run(tmp_path: Path, policy_type: str = "act", step: int = 200, processes: int = 1, cameras: bool = True) -> Path:
     """An output directory as lerobot-train leaves it after its checkpoint of `step` on a camera dataset (the
     checkpoints/last link, train_config.json and training_step.json; no weights, no process)."""
     output = tmp_path / "run"
@@ -249,7 +249,8 @@ def interrupted_run(tmp_path: Path, policy_type: str = "act", step: int = 200, p
     (checkpoint / "pretrained_model").mkdir(parents=True)
     (checkpoint / "training_state").mkdir()
     (output / "checkpoints" / "last").symlink_to(checkpoint.name)
-    camera_dataset(tmp_path / "data")
+    if cameras:
+        camera_dataset(tmp_path / "data")
     config = {
         "policy": {"type": policy_type, "device": "cpu"},
         "dataset": {"root": str(tmp_path / "data")},
@@ -283,6 +284,13 @@ def test_a_resumed_run_continues_its_checkpoint_with_its_own_settings(tmp_path):
     longer = parse("act", "--resume", str(output), "--steps", "5000", "--save-every", "100", "--loader-workers", "0")
     command = lerobot_train.resume_command(longer, lerobot_train.resume_settings(longer)[1], run_dir)
     assert longer.steps == 5000 and {"--steps=5000", "--save_freq=100", "--num_workers=0"} <= set(command)
+
+
+def test_a_resumed_run_on_a_dataset_without_cameras_keeps_its_items_in_memory(tmp_path):
+    output = interrupted_run(tmp_path, policy_type="diffusion", cameras=False)
+    args = parse("diffusion", "--resume", str(output))
+    command = lerobot_train.resume_command(args, lerobot_train.resume_settings(args)[1], output.resolve())
+    assert command[:3] == [sys.executable, "-m", "so101.learn.train_in_memory"] and "--num_workers=0" in command
 
 
 def test_a_resumed_run_keeps_its_processes_and_may_be_a_copy_without_links(tmp_path):

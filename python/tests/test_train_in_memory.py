@@ -47,6 +47,9 @@ def test_the_wrapper_is_the_dataset_it_wraps_but_for_its_items():
     # A spawned loader process gets a copy by pickling.
     copy = pickle.loads(pickle.dumps(kept))
     assert copy.num_frames == 4 and float(copy[2]["action"][0, 0]) == 2.0
+    # Protocols are the wrapper's own: a batched read of the wrapped dataset would bypass the kept items.
+    dataset.__getitems__ = lambda indices: [dataset[i] for i in indices]
+    assert not hasattr(kept, "__getitems__")
 
 
 def test_only_a_dataset_without_cameras_is_kept():

@@ -99,6 +99,7 @@ def test_two_processes_train_one_policy_through_accelerate_on_the_cpu(demos, tmp
     done = learn(*argv, "--output", str(output), *[f"--policy-arg={arg}" for arg in tiny], timeout=300)
     log = done.stdout + done.stderr
     assert "Effective batch size: 4 x 2 = 8" in log, log[-3000:]
+    assert "-m so101.learn.train_in_memory" in log and "items is kept in memory" in log, log[-3000:]
     checkpoint = output / "checkpoints" / "last" / "pretrained_model"
     assert json.loads((checkpoint / "config.json").read_text())["dim_model"] == 32
     assert (checkpoint / "model.safetensors").is_file()

@@ -173,8 +173,9 @@ def add_arguments(p: argparse.ArgumentParser, name: str) -> None:
         "--loader-workers",
         type=int,
         default=None,
-        help="dataset loader processes per training process (default 1 on the CPU, where they share the cores with "
-        "the step; with --device cuda up to 8, as the CPU's cores allow: a GPU waits on decoding otherwise)",
+        help="dataset loader processes per training process (default: none for a dataset without cameras, whose "
+        "items stay in memory; with cameras 1 on the CPU, where they share the cores with the step, and with "
+        "--device cuda up to 8, as the CPU's cores allow: a GPU waits on decoding otherwise)",
     )
     p.add_argument(
         "--reread-items",

@@ -35,9 +35,10 @@ class ItemsInMemory(Dataset):
         return dict(item)
 
     def __getattr__(self, name: str):
-        # Only for attributes this wrapper lacks; `dataset` itself is looked up through __dict__ so
-        # an unpickled copy, which has none yet, raises instead of recursing.
-        if name == "dataset":
+        # Only for attributes this wrapper lacks. Not `dataset` itself (an unpickled copy has none
+        # yet: it raises instead of recursing), nor Python's and torch's protocols: a batched
+        # __getitems__ of the wrapped dataset would bypass the kept items.
+        if name == "dataset" or name.startswith("__"):
             raise AttributeError(name)
         return getattr(self.dataset, name)
 
