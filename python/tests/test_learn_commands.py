@@ -12,6 +12,7 @@ from pathlib import Path
 import pytest
 
 from so101.learn import cli, demos, lerobot_train
+from so101.learn.checkpoints import record_items_in_memory
 
 
 def parse(name: str, *argv: str) -> argparse.Namespace:
@@ -241,9 +242,12 @@ def test_demos_record_in_parallel_only_in_process(tmp_path):
         demos.run(args)
 
 
-def interrupted_run(tmp_path: Path, policy_type: str = "act", step: int = 200, processes: int = 1, cameras: bool = True) -> Path:
+def interrupted_run(
+    tmp_path: Path, policy_type: str = "act", step: int = 200, processes: int = 1, cameras: bool = True, in_memory: bool = False
+) -> Path:
     """An output directory as lerobot-train leaves it after its checkpoint of `step` on a camera dataset (the
-    checkpoints/last link, train_config.json and training_step.json; no weights, no process)."""
+    checkpoints/last link, train_config.json and training_step.json; no weights, no process), with the record
+    so101.learn.train_in_memory leaves if `in_memory`."""
     output = tmp_path / "run"
     checkpoint = output / "checkpoints" / f"{step:06d}"
     (checkpoint / "pretrained_model").mkdir(parents=True)
@@ -260,6 +264,8 @@ def interrupted_run(tmp_path: Path, policy_type: str = "act", step: int = 200, p
     (checkpoint / "pretrained_model" / "train_config.json").write_text(json.dumps(config))
     state = {"step": step, "num_processes": processes, "batch_size": 32}
     (checkpoint / "training_state" / "training_step.json").write_text(json.dumps(state))
+    if in_memory:
+        record_items_in_memory(output, 1000)
     return output
 
 
@@ -287,10 +293,21 @@ def test_a_resumed_run_continues_its_checkpoint_with_its_own_settings(tmp_path):
 
 
 def test_a_resumed_run_on_a_dataset_without_cameras_keeps_its_items_in_memory(tmp_path):
-    output = interrupted_run(tmp_path, policy_type="diffusion", cameras=False)
+    output = interrupted_run(tmp_path, policy_type="diffusion", cameras=False, in_memory=True)
     args = parse("diffusion", "--resume", str(output))
     command = lerobot_train.resume_command(args, lerobot_train.resume_settings(args)[1], output.resolve())
     assert command[:3] == [sys.executable, "-m", "so101.learn.train_in_memory"] and "--num_workers=0" in command
+
+
+def test_a_resumed_run_of_lerobot_trains_own_loading_keeps_it(tmp_path):
+    """A run that read its items at every step (--reread-items, or started before the items were
+    kept) resumes that way, with its loader process: other loading would give other weights."""
+    output = interrupted_run(tmp_path, policy_type="diffusion", cameras=False)
+    args = parse("diffusion", "--resume", str(output))
+    command = lerobot_train.resume_command(args, lerobot_train.resume_settings(args)[1], output.resolve())
+    assert Path(command[0]).name == "lerobot-train" and "--num_workers=1" in command
+    with pytest.raises(SystemExit, match="own dataset, output, batch size, seed and loading: leave out --reread-items"):
+        lerobot_train.resume_settings(parse("diffusion", "--resume", str(output), "--reread-items"))
 
 
 def test_a_resumed_run_keeps_its_processes_and_may_be_a_copy_without_links(tmp_path):

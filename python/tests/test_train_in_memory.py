@@ -8,6 +8,7 @@ from types import SimpleNamespace
 
 import torch
 
+from so101.learn.checkpoints import runs_items_in_memory
 from so101.learn.train_in_memory import ItemsInMemory, keeps_items, with_items_in_memory
 
 
@@ -52,9 +53,18 @@ def test_the_wrapper_is_the_dataset_it_wraps_but_for_its_items():
     assert not hasattr(kept, "__getitems__")
 
 
-def test_only_a_dataset_without_cameras_is_kept():
+def test_only_a_dataset_without_cameras_is_kept_and_its_run_records_it(tmp_path, monkeypatch):
+    monkeypatch.delenv("RANK", raising=False)
     state, cameras = CountingDataset(3, []), CountingDataset(3, ["observation.images.top"])
     assert keeps_items(state) and not keeps_items(cameras)
-    make = with_items_in_memory(lambda cfg: ({"state": state, "cameras": cameras}[cfg], None))
-    assert isinstance(make("state")[0], ItemsInMemory)
-    assert make("cameras")[0] is cameras
+    make = with_items_in_memory(lambda cfg: ({"state": state, "cameras": cameras}[cfg.kind], None))
+    # lerobot-train has not made its output directory yet when it makes the datasets.
+    kept_run, camera_run = tmp_path / "kept" / "run", tmp_path / "cameras"
+    assert isinstance(make(SimpleNamespace(kind="state", output_dir=kept_run))[0], ItemsInMemory)
+    assert make(SimpleNamespace(kind="cameras", output_dir=camera_run))[0] is cameras
+    # What --resume reads to go on the same way.
+    assert runs_items_in_memory(kept_run) and not runs_items_in_memory(camera_run)
+    # Of accelerate's processes only the first writes it.
+    monkeypatch.setenv("RANK", "1")
+    make(SimpleNamespace(kind="state", output_dir=tmp_path / "second"))
+    assert not runs_items_in_memory(tmp_path / "second")

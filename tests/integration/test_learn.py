@@ -105,16 +105,18 @@ def test_two_processes_train_one_policy_through_accelerate_on_the_cpu(demos, tmp
     assert (checkpoint / "model.safetensors").is_file()
 
 
-def test_an_interrupted_training_resumes_to_the_weights_of_an_uninterrupted_one(demos, tmp_path):
+@pytest.mark.parametrize("loading", [[], ["--reread-items"]], ids=["items-in-memory", "lerobot-train-loading"])
+def test_an_interrupted_training_resumes_to_the_weights_of_an_uninterrupted_one(demos, tmp_path, loading):
     """A run stopped between checkpoints (its last checkpoint is step 2 of 4) continues with
     --resume from that checkpoint (weights, optimizer, learning-rate schedule, data order) to the
-    very weights the run reached without a stop."""
+    very weights the run reached without a stop, loading its items as it began: kept in memory
+    (the default), or read at every step by lerobot-train's loader process (--reread-items)."""
     from safetensors.torch import load_file
 
     output = tmp_path / "act"
     tiny = ["--policy.dim_model=32", "--policy.n_heads=2", "--policy.dim_feedforward=64", "--policy.n_encoder_layers=1"]
     argv = ["act", "--dataset", str(demos), "--steps", "4", "--batch-size", "4", "--save-every", "2", "--eval", "0"]
-    learn(*argv, "--output", str(output), *[f"--policy-arg={arg}" for arg in tiny], timeout=300)
+    learn(*argv, *loading, "--output", str(output), *[f"--policy-arg={arg}" for arg in tiny], timeout=300)
     checkpoints = output / "checkpoints"
     uninterrupted = load_file(checkpoints / "000004" / "pretrained_model" / "model.safetensors")
     # What a kill between the checkpoints of steps 2 and 4 leaves.
@@ -124,6 +126,10 @@ def test_an_interrupted_training_resumes_to_the_weights_of_an_uninterrupted_one(
 
     done = learn("act", "--resume", str(output), "--eval", "0", timeout=300)
     assert "trained to step 4 (batch 4), resumed from step 2: 2 steps" in done.stdout, done.stdout[-2000:]
+    if loading:
+        assert "bin/lerobot-train " in done.stdout and "--num_workers=1" in done.stdout, done.stdout[-2000:]
+    else:
+        assert "-m so101.learn.train_in_memory" in done.stdout and "--num_workers=0" in done.stdout, done.stdout[-2000:]
     assert os.readlink(checkpoints / "last") == "000004"
     resumed = load_file(checkpoints / "000004" / "pretrained_model" / "model.safetensors")
     assert resumed.keys() == uninterrupted.keys()

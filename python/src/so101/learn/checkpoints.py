@@ -1,7 +1,8 @@
 """A lerobot-train run directory as LeRobot leaves it, read for `so101-learn act|diffusion --resume`:
 OUTPUT/checkpoints/<step>/ with pretrained_model/ (the weights and train_config.json) and
 training_state/ (optimizer, scheduler, RNG, training_step.json), and checkpoints/last pointing at
-the newest checkpoint once it is written whole (the names are LeRobot's, lerobot.utils.constants)."""
+the newest checkpoint once it is written whole (the names are LeRobot's, lerobot.utils.constants);
+beside them, ours: whether the run kept its items in memory (so101.learn.train_in_memory)."""
 
 from __future__ import annotations
 
@@ -13,6 +14,9 @@ CHECKPOINTS = "checkpoints"
 LAST = "last"
 TRAIN_CONFIG = Path("pretrained_model") / "train_config.json"
 TRAINING_STEP = Path("training_state") / "training_step.json"
+# The run keeps its items in memory. --resume reads it to go on the same way: a run's loading
+# decides its weights (lerobot-train's loader process alone changes them).
+ITEMS_IN_MEMORY = "so101_items_in_memory.json"
 
 
 class CheckpointError(Exception):
@@ -55,3 +59,14 @@ def last_checkpoint(output: Path) -> Checkpoint:
         step=int(state["step"]),
         num_processes=state.get("num_processes"),
     )
+
+
+def runs_items_in_memory(output: Path) -> bool:
+    """Whether the run in `output` keeps its items in memory. A run of lerobot-train's own loading
+    has no record, nor has one started before the record existed (2026-11-29)."""
+    return (output / ITEMS_IN_MEMORY).is_file()
+
+
+def record_items_in_memory(output: Path, items: int) -> None:
+    output.mkdir(parents=True, exist_ok=True)
+    (output / ITEMS_IN_MEMORY).write_text(json.dumps({"items_in_memory": True, "items": items}) + "\n")

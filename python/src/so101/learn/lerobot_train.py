@@ -40,7 +40,7 @@ from .. import contract
 from ..dataset.parquet import read_parquet
 from ..paths import repo_root
 from . import augment
-from .checkpoints import Checkpoint, CheckpointError, last_checkpoint
+from .checkpoints import Checkpoint, CheckpointError, last_checkpoint, runs_items_in_memory
 from .eval_recipe import run_policy_command
 
 # ACT: every input and the actions by their mean and std (the cube's pose too: its z of ~0.77 m and a
@@ -205,8 +205,8 @@ def add_arguments(p: argparse.ArgumentParser, name: str) -> None:
         metavar="OUTPUT",
         default=None,
         help="continue the interrupted run in OUTPUT from its last checkpoint (LeRobot's resume: weights, optimizer, "
-        "learning-rate schedule, data order) instead of starting one; its dataset, batch size, seed, device and "
-        "processes are the run's (--steps lengthens it, --device and --num-processes override), then the evaluation "
+        "learning-rate schedule, data order) instead of starting one; its dataset, batch size, seed, loading of items, "
+        "device and processes are the run's (--steps lengthens it, --device and --num-processes override), then the evaluation "
         "as asked",
     )
     p.add_argument("--eval", type=int, default=20, metavar="M", help="then evaluate over M seeded episodes (0: no evaluation)")
@@ -400,11 +400,13 @@ def resume_settings(args) -> tuple[Path, Checkpoint]:
         "--batch-size": args.batch_size,
         "--seed": args.seed,
         "--augment": args.augment,
+        "--reread-items": True if args.reread_items else None,
     }
     given = [flag for flag, value in own.items() if value is not None]
     if given:
         raise SystemExit(
-            f"{name}: --resume continues the run with its own dataset, output, batch size and seed: leave out {', '.join(given)}"
+            f"{name}: --resume continues the run with its own dataset, output, batch size, seed and loading: "
+            f"leave out {', '.join(given)}"
         )
     output = Path(args.resume).resolve()
     try:
@@ -416,6 +418,8 @@ def resume_settings(args) -> tuple[Path, Checkpoint]:
         trains = config["policy"]["type"]
         raise SystemExit(f"{name}: {output} trains a {trains} policy: resume it with so101-learn {trains}")
     args.dataset, args.batch_size = config["dataset"]["root"], config["batch_size"]
+    # The run's own loading: switching would give weights the uninterrupted run would not reach.
+    args.reread_items = not runs_items_in_memory(output)
     args.steps = config["steps"] if args.steps is None else args.steps
     if args.device is None:
         args.device = config["policy"]["device"]

@@ -12,8 +12,12 @@ kept item. A dataset with cameras goes through untouched: its augmentation diffe
 from __future__ import annotations
 
 import logging
+import os
+from pathlib import Path
 
 from torch.utils.data import Dataset, IterableDataset
+
+from .checkpoints import record_items_in_memory
 
 
 class ItemsInMemory(Dataset):
@@ -50,7 +54,7 @@ def keeps_items(dataset) -> bool:
 
 def with_items_in_memory(make_datasets):
     """lerobot-train's dataset factory, its training dataset wrapped in ItemsInMemory when its
-    items are the same at every read."""
+    items are the same at every read (and the run's output directory says so)."""
 
     def make(cfg):
         dataset, eval_dataset = make_datasets(cfg)
@@ -58,6 +62,9 @@ def with_items_in_memory(make_datasets):
             logging.info(
                 "so101: the dataset has no cameras: each of its %d items is kept in memory after its first read", len(dataset)
             )
+            # One writer: accelerate numbers its processes in RANK, the first is 0 (one process: unset).
+            if os.environ.get("RANK", "0") == "0":
+                record_items_in_memory(Path(cfg.output_dir), len(dataset))
             dataset = ItemsInMemory(dataset)
         return dataset, eval_dataset
 
