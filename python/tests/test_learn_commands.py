@@ -243,11 +243,17 @@ def test_demos_record_in_parallel_only_in_process(tmp_path):
 
 
 def interrupted_run(
-    tmp_path: Path, policy_type: str = "act", step: int = 200, processes: int = 1, cameras: bool = True, in_memory: bool = False
+    tmp_path: Path,
+    policy_type: str = "act",
+    step: int = 200,
+    processes: int = 1,
+    cameras: bool = True,
+    in_memory: bool = False,
+    loader_workers: int | None = None,
 ) -> Path:
     """An output directory as lerobot-train leaves it after its checkpoint of `step` on a camera dataset (the
     checkpoints/last link, train_config.json and training_step.json; no weights, no process), with the record
-    so101.learn.train_in_memory leaves if `in_memory`."""
+    so101.learn.train_in_memory leaves in it if `in_memory`, and lerobot-train's num_workers if given."""
     output = tmp_path / "run"
     checkpoint = output / "checkpoints" / f"{step:06d}"
     (checkpoint / "pretrained_model").mkdir(parents=True)
@@ -261,11 +267,13 @@ def interrupted_run(
         "steps": 4000,
         "batch_size": 32,
     }
+    if loader_workers is not None:
+        config["num_workers"] = loader_workers
     (checkpoint / "pretrained_model" / "train_config.json").write_text(json.dumps(config))
     state = {"step": step, "num_processes": processes, "batch_size": 32}
     (checkpoint / "training_state" / "training_step.json").write_text(json.dumps(state))
     if in_memory:
-        record_items_in_memory(output, 1000)
+        record_items_in_memory(checkpoint, 1000)
     return output
 
 
@@ -306,8 +314,24 @@ def test_a_resumed_run_of_lerobot_trains_own_loading_keeps_it(tmp_path):
     args = parse("diffusion", "--resume", str(output))
     command = lerobot_train.resume_command(args, lerobot_train.resume_settings(args)[1], output.resolve())
     assert Path(command[0]).name == "lerobot-train" and "--num_workers=1" in command
+    # A checkpoint copied without its run directory keeps the record: it is the checkpoint's.
+    kept = interrupted_run(tmp_path / "kept", policy_type="diffusion", cameras=False, in_memory=True)
+    assert lerobot_train.resume_settings(parse("diffusion", "--resume", str(kept)))[1].items_in_memory
     with pytest.raises(SystemExit, match="own dataset, output, batch size, seed and loading: leave out --reread-items"):
         lerobot_train.resume_settings(parse("diffusion", "--resume", str(output), "--reread-items"))
+
+
+def test_a_resumed_run_keeps_its_loader_processes_where_it_stays(tmp_path):
+    """A run started with --loader-workers 0 resumes with none (a loader process changes the
+    weights); moved to a GPU it gets the GPU's loaders, and --loader-workers overrides either."""
+    output = interrupted_run(tmp_path, loader_workers=0)
+    args = parse("act", "--resume", str(output))
+    assert "--num_workers=0" in lerobot_train.resume_command(args, lerobot_train.resume_settings(args)[1], output.resolve())
+    moved = parse("act", "--resume", str(output), "--device", "cuda")
+    command = lerobot_train.resume_command(moved, lerobot_train.resume_settings(moved)[1], output.resolve())
+    assert "--num_workers=0" not in command
+    told = parse("act", "--resume", str(output), "--loader-workers", "2")
+    assert "--num_workers=2" in lerobot_train.resume_command(told, lerobot_train.resume_settings(told)[1], output.resolve())
 
 
 def test_a_resumed_run_keeps_its_processes_and_may_be_a_copy_without_links(tmp_path):

@@ -3,13 +3,14 @@ memory, and is otherwise the dataset it wraps (lerobot-train reads its meta, epi
 
 from __future__ import annotations
 
+import json
 import pickle
 from types import SimpleNamespace
 
 import torch
 
-from so101.learn.checkpoints import runs_items_in_memory
-from so101.learn.train_in_memory import ItemsInMemory, keeps_items, with_items_in_memory
+from so101.learn.checkpoints import ITEMS_IN_MEMORY
+from so101.learn.train_in_memory import ItemsInMemory, KeptItems, keeps_items, recording_kept_items, with_items_in_memory
 
 
 class CountingDataset(torch.utils.data.Dataset):
@@ -53,18 +54,23 @@ def test_the_wrapper_is_the_dataset_it_wraps_but_for_its_items():
     assert not hasattr(kept, "__getitems__")
 
 
-def test_only_a_dataset_without_cameras_is_kept_and_its_run_records_it(tmp_path, monkeypatch):
-    monkeypatch.delenv("RANK", raising=False)
+def test_only_a_dataset_without_cameras_is_kept_and_its_checkpoints_say_so(tmp_path):
     state, cameras = CountingDataset(3, []), CountingDataset(3, ["observation.images.top"])
     assert keeps_items(state) and not keeps_items(cameras)
-    make = with_items_in_memory(lambda cfg: ({"state": state, "cameras": cameras}[cfg.kind], None))
-    # lerobot-train has not made its output directory yet when it makes the datasets.
-    kept_run, camera_run = tmp_path / "kept" / "run", tmp_path / "cameras"
-    assert isinstance(make(SimpleNamespace(kind="state", output_dir=kept_run))[0], ItemsInMemory)
-    assert make(SimpleNamespace(kind="cameras", output_dir=camera_run))[0] is cameras
-    # What --resume reads to go on the same way.
-    assert runs_items_in_memory(kept_run) and not runs_items_in_memory(camera_run)
-    # Of accelerate's processes only the first writes it.
-    monkeypatch.setenv("RANK", "1")
-    make(SimpleNamespace(kind="state", output_dir=tmp_path / "second"))
-    assert not runs_items_in_memory(tmp_path / "second")
+    saved = []
+
+    def save_checkpoint(checkpoint_dir, step, **rest):  # lerobot-train's, as it calls it: by keyword
+        checkpoint_dir.mkdir(parents=True)
+        saved.append(step)
+
+    for kind, dataset in (("state", state), ("cameras", cameras)):
+        kept = KeptItems()
+        made = with_items_in_memory(lambda cfg: ({"state": state, "cameras": cameras}[cfg], None), kept)(kind)[0]
+        assert isinstance(made, ItemsInMemory) if kind == "state" else made is dataset
+        checkpoint = tmp_path / kind / "checkpoints" / "000002"
+        recording_kept_items(save_checkpoint, kept)(checkpoint_dir=checkpoint, step=2, cfg=None)
+        # What --resume reads to go on the same way.
+        record = checkpoint / ITEMS_IN_MEMORY
+        assert record.is_file() == (kind == "state")
+    assert saved == [2, 2]
+    assert json.loads((tmp_path / "state" / "checkpoints" / "000002" / ITEMS_IN_MEMORY).read_text())["items"] == 3

@@ -118,6 +118,8 @@ def test_an_interrupted_training_resumes_to_the_weights_of_an_uninterrupted_one(
     argv = ["act", "--dataset", str(demos), "--steps", "4", "--batch-size", "4", "--save-every", "2", "--eval", "0"]
     learn(*argv, *loading, "--output", str(output), *[f"--policy-arg={arg}" for arg in tiny], timeout=300)
     checkpoints = output / "checkpoints"
+    # Each checkpoint says how its run loads its items (what --resume reads).
+    assert (checkpoints / "000002" / "so101_items_in_memory.json").is_file() == (not loading)
     uninterrupted = load_file(checkpoints / "000004" / "pretrained_model" / "model.safetensors")
     # What a kill between the checkpoints of steps 2 and 4 leaves.
     shutil.rmtree(checkpoints / "000004")

@@ -2,7 +2,8 @@
 OUTPUT/checkpoints/<step>/ with pretrained_model/ (the weights and train_config.json) and
 training_state/ (optimizer, scheduler, RNG, training_step.json), and checkpoints/last pointing at
 the newest checkpoint once it is written whole (the names are LeRobot's, lerobot.utils.constants);
-beside them, ours: whether the run kept its items in memory (so101.learn.train_in_memory)."""
+in each checkpoint, beside LeRobot's, ours: whether the run keeps its items in memory
+(so101.learn.train_in_memory)."""
 
 from __future__ import annotations
 
@@ -14,8 +15,8 @@ CHECKPOINTS = "checkpoints"
 LAST = "last"
 TRAIN_CONFIG = Path("pretrained_model") / "train_config.json"
 TRAINING_STEP = Path("training_state") / "training_step.json"
-# The run keeps its items in memory. --resume reads it to go on the same way: a run's loading
-# decides its weights (lerobot-train's loader process alone changes them).
+# In a checkpoint: its run keeps its items in memory. --resume reads it to go on the same way: a
+# run's loading decides its weights (lerobot-train's loader process alone changes them).
 ITEMS_IN_MEMORY = "so101_items_in_memory.json"
 
 
@@ -31,6 +32,9 @@ class Checkpoint:
     config: dict  # that file's settings (policy, dataset, steps, batch_size, ...)
     step: int  # the training step it was written at
     num_processes: int | None  # the processes that trained it (None: a LeRobot older than the record)
+    # Its run kept its items in memory. False for lerobot-train's own loading, and for a run
+    # started before the record existed (before 2026-11-29, 04:36 UTC).
+    items_in_memory: bool
 
 
 def last_checkpoint(output: Path) -> Checkpoint:
@@ -58,15 +62,11 @@ def last_checkpoint(output: Path) -> Checkpoint:
         config=json.loads((last / TRAIN_CONFIG).read_text()),
         step=int(state["step"]),
         num_processes=state.get("num_processes"),
+        items_in_memory=(last / ITEMS_IN_MEMORY).is_file(),
     )
 
 
-def runs_items_in_memory(output: Path) -> bool:
-    """Whether the run in `output` keeps its items in memory. A run of lerobot-train's own loading
-    has no record, nor has one started before the record existed (2026-11-29)."""
-    return (output / ITEMS_IN_MEMORY).is_file()
-
-
-def record_items_in_memory(output: Path, items: int) -> None:
-    output.mkdir(parents=True, exist_ok=True)
-    (output / ITEMS_IN_MEMORY).write_text(json.dumps({"items_in_memory": True, "items": items}) + "\n")
+def record_items_in_memory(checkpoint_dir: Path, items: int) -> None:
+    """Marks a checkpoint as one of a run keeping its items in memory (written beside its
+    pretrained_model/ and training_state/, so it travels with the checkpoint)."""
+    (checkpoint_dir / ITEMS_IN_MEMORY).write_text(json.dumps({"items_in_memory": True, "items": items}) + "\n")

@@ -40,7 +40,7 @@ from .. import contract
 from ..dataset.parquet import read_parquet
 from ..paths import repo_root
 from . import augment
-from .checkpoints import Checkpoint, CheckpointError, last_checkpoint, runs_items_in_memory
+from .checkpoints import Checkpoint, CheckpointError, last_checkpoint
 from .eval_recipe import run_policy_command
 
 # ACT: every input and the actions by their mean and std (the cube's pose too: its z of ~0.77 m and a
@@ -206,8 +206,8 @@ def add_arguments(p: argparse.ArgumentParser, name: str) -> None:
         default=None,
         help="continue the interrupted run in OUTPUT from its last checkpoint (LeRobot's resume: weights, optimizer, "
         "learning-rate schedule, data order) instead of starting one; its dataset, batch size, seed, loading of items, "
-        "device and processes are the run's (--steps lengthens it, --device and --num-processes override), then the evaluation "
-        "as asked",
+        "loader processes, device and processes are the run's (--steps lengthens it, --device, --num-processes and "
+        "--loader-workers override), then the evaluation as asked",
     )
     p.add_argument("--eval", type=int, default=20, metavar="M", help="then evaluate over M seeded episodes (0: no evaluation)")
     p.add_argument("--eval-seed", type=int, default=1000, help="seed of the first evaluation episode (demos start at 0)")
@@ -418,19 +418,34 @@ def resume_settings(args) -> tuple[Path, Checkpoint]:
         trains = config["policy"]["type"]
         raise SystemExit(f"{name}: {output} trains a {trains} policy: resume it with so101-learn {trains}")
     args.dataset, args.batch_size = config["dataset"]["root"], config["batch_size"]
-    # The run's own loading: switching would give weights the uninterrupted run would not reach.
-    args.reread_items = not runs_items_in_memory(output)
     args.steps = config["steps"] if args.steps is None else args.steps
     if args.device is None:
         args.device = config["policy"]["device"]
     if args.num_processes is None:
         args.num_processes = checkpoint.num_processes or 1
+    resume_loading(args, checkpoint)
     if checkpoint.step >= args.steps:
         raise SystemExit(
             f"{name}: {output} has trained {checkpoint.step} steps of {args.steps} already: --steps N, over "
             f"{checkpoint.step}, lengthens it; so101-run-policy {checkpoint.config_file.parent} --eval M evaluates it"
         )
     return output, checkpoint
+
+
+def resume_loading(args, checkpoint: Checkpoint) -> None:
+    """The run's own loading, since another gives weights the uninterrupted run would not reach:
+    items kept in memory or read at every step, and its loader processes, unless the run moves to
+    another device or number of processes (or --loader-workers says otherwise)."""
+    args.reread_items = not checkpoint.items_in_memory
+    if args.reread_items and args.policy_type in PRESETS and not has_cameras(Path(args.dataset)):
+        print(
+            f"so101-learn {args.policy_type}: the checkpoint does not say its run kept its items in memory (a run with "
+            "--reread-items, or one started before 2026-11-29, 04:36 UTC): it resumes with lerobot-train's loading",
+            flush=True,
+        )
+    same_place = args.device == checkpoint.config["policy"]["device"] and args.num_processes == (checkpoint.num_processes or 1)
+    if args.loader_workers is None and same_place:
+        args.loader_workers = checkpoint.config.get("num_workers")
 
 
 def resume_command(args, checkpoint: Checkpoint, output: Path) -> list[str]:

@@ -7,12 +7,13 @@ of 64, against 153 ms for a whole Diffusion step (forward, backward, AdamW) of t
 A state item is the same every epoch (image transforms and video decoding are the only random or
 costly parts, and such a dataset has no cameras), so after the first pass the loader returns the
 kept item. A dataset with cameras goes through untouched: its augmentation differs each epoch.
+Each checkpoint of a run that keeps its items says so (so101.learn.checkpoints), for --resume.
 """
 
 from __future__ import annotations
 
 import logging
-import os
+from dataclasses import dataclass
 from pathlib import Path
 
 from torch.utils.data import Dataset, IterableDataset
@@ -52,9 +53,16 @@ def keeps_items(dataset) -> bool:
     return not isinstance(dataset, IterableDataset) and not dataset.meta.camera_keys
 
 
-def with_items_in_memory(make_datasets):
+@dataclass
+class KeptItems:
+    """What this process's training dataset keeps in memory: its number of items, or None."""
+
+    count: int | None = None
+
+
+def with_items_in_memory(make_datasets, kept: KeptItems):
     """lerobot-train's dataset factory, its training dataset wrapped in ItemsInMemory when its
-    items are the same at every read (and the run's output directory says so)."""
+    items are the same at every read (noted in `kept`)."""
 
     def make(cfg):
         dataset, eval_dataset = make_datasets(cfg)
@@ -62,25 +70,38 @@ def with_items_in_memory(make_datasets):
             logging.info(
                 "so101: the dataset has no cameras: each of its %d items is kept in memory after its first read", len(dataset)
             )
-            # One writer: accelerate numbers its processes in RANK, the first is 0 (one process: unset).
-            if os.environ.get("RANK", "0") == "0":
-                record_items_in_memory(Path(cfg.output_dir), len(dataset))
+            kept.count = len(dataset)
             dataset = ItemsInMemory(dataset)
         return dataset, eval_dataset
 
     return make
 
 
+def recording_kept_items(save_checkpoint, kept: KeptItems):
+    """lerobot-train's save_checkpoint (its main process's alone), each checkpoint then marked as
+    one of a run that keeps its items in memory when it does."""
+
+    def save(*args, **kwargs):
+        save_checkpoint(*args, **kwargs)
+        if kept.count is not None:
+            record_items_in_memory(Path(kwargs["checkpoint_dir"] if "checkpoint_dir" in kwargs else args[0]), kept.count)
+
+    return save
+
+
 def main() -> None:
     from lerobot.scripts import lerobot_train
 
     factory = getattr(lerobot_train, "make_train_eval_datasets", None)
-    if factory is None:
+    save_checkpoint = getattr(lerobot_train, "save_checkpoint", None)
+    if factory is None or save_checkpoint is None:
         raise SystemExit(
-            "so101.learn.train_in_memory: this LeRobot's lerobot-train makes its datasets another way; "
+            "so101.learn.train_in_memory: this LeRobot's lerobot-train makes its datasets or checkpoints another way; "
             "train with so101-learn --reread-items (lerobot-train itself)"
         )
-    lerobot_train.make_train_eval_datasets = with_items_in_memory(factory)
+    kept = KeptItems()
+    lerobot_train.make_train_eval_datasets = with_items_in_memory(factory, kept)
+    lerobot_train.save_checkpoint = recording_kept_items(save_checkpoint, kept)
     lerobot_train.main()
 
 
