@@ -277,10 +277,15 @@ LEROBOT_TRAIN = "lerobot.scripts.lerobot_train"
 IN_MEMORY_TRAIN = "so101.learn.train_in_memory"
 
 
+def can_keep_items(args) -> bool:
+    """Whether the run's items may stay in memory (so101.learn.train_in_memory): ACT's or
+    Diffusion's (a VLA's dataset has cameras) on a dataset without cameras."""
+    return args.policy_type in PRESETS and not has_cameras(Path(args.dataset))
+
+
 def items_in_memory(args) -> bool:
-    """Whether the run keeps its dataset's items in memory (so101.learn.train_in_memory): ACT's or
-    Diffusion's (a VLA's dataset has cameras) on a dataset without cameras, unless --reread-items."""
-    return args.policy_type in PRESETS and not args.reread_items and not has_cameras(Path(args.dataset))
+    """Whether the run keeps its dataset's items in memory: it can, and --reread-items is not given."""
+    return can_keep_items(args) and not args.reread_items
 
 
 def trainer_module(args) -> str:
@@ -437,7 +442,7 @@ def resume_loading(args, checkpoint: Checkpoint) -> None:
     items kept in memory or read at every step, and its loader processes, unless the run moves to
     another device or number of processes (or --loader-workers says otherwise)."""
     args.reread_items = not checkpoint.items_in_memory
-    if args.reread_items and args.policy_type in PRESETS and not has_cameras(Path(args.dataset)):
+    if args.reread_items and can_keep_items(args):
         print(
             f"so101-learn {args.policy_type}: the checkpoint does not say its run kept its items in memory (a run with "
             "--reread-items, or one started before 2026-11-29, 04:36 UTC): it resumes with lerobot-train's loading",
