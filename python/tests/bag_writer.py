@@ -82,12 +82,19 @@ class EpisodeBag:
             {"header": header(t), "name": list(names), "position": [float(p) for p in positions], "velocity": [], "effort": []},
         )
 
-    def command(self, t: float, names, positions) -> None:
+    def command(self, t: float, names, positions, stamp: float | None = None) -> None:
+        """A /joint_commands message received at `t`, stamped `stamp` (default `t`; 0: none)."""
         self.add(
             t,
             "/" + contract.JOINT_COMMANDS,
             "sensor_msgs/msg/JointState",
-            {"header": header(t), "name": list(names), "position": [float(p) for p in positions], "velocity": [], "effort": []},
+            {
+                "header": header(t if stamp is None else stamp),
+                "name": list(names),
+                "position": [float(p) for p in positions],
+                "velocity": [],
+                "effort": [],
+            },
         )
 
     def array_command(self, t: float, values) -> None:

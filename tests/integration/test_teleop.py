@@ -391,6 +391,24 @@ def test_the_expert_puts_the_cube_in_the_bin_in_seeded_episodes_and_the_recorder
         assert min(grippers) < 0 < 0.8 < max(grippers), f"{directory.name}: the gripper never opened and closed"
 
 
+def test_in_lockstep_each_command_is_stamped_with_the_state_it_answers(sim_factory, teleop_factory, ros):
+    """The expert in step with the sim: each command advances one control period, and its stamp is
+    the sim time of the /joint_states it answers (the period it acts in), so a recording places it
+    on that state's frame whatever the order the recorder took the two in."""
+    sim = sim_factory("--lockstep", "--step-on-command", "--seed", "3")
+    commands = commands_inbox(ros)
+    teleop = teleop_factory("--source", "expert", "--lockstep", "--episodes", "1", "--seed", "3")
+    wait_until(lambda: commands.count() >= 90, 60.0, "90 lockstep commands", sim)
+    assert teleop.alive(), teleop.log_tail()
+    stamps = np.array([m.header.stamp.sec + m.header.stamp.nanosec * 1e-9 for m in commands.messages()[:90]])
+    assert np.all(stamps > 0), f"unstamped lockstep commands: {stamps[:10]}"
+    # One control period of the sim (its default 100 Hz: five 2 ms physics steps) from one command
+    # to the next: one step per command, each stamped with the state that step started from.
+    steps = stamps / 0.002
+    np.testing.assert_allclose(steps, np.round(steps), atol=1e-3)
+    assert set(np.round(np.diff(steps)).astype(int)) == {5}, np.diff(steps)
+
+
 # =========================================================================== bad input
 def test_bad_flags_and_scripts_are_refused_with_a_message(tmp_path):
     def run(*args):

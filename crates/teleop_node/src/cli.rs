@@ -52,8 +52,9 @@ pub struct Args {
     #[arg(long)]
     pub sim_time: bool,
     /// Expert: advance in step with a sim started with --lockstep --step-on-command. Each command
-    /// is one of the sim's control periods (30 Hz), the next computed once that period's
-    /// /joint_states, /cube/pose and /task/success are in, time read from the states' stamps:
+    /// is one of the sim's control periods (its --rate, 100 Hz by default), the next computed
+    /// once that period's /joint_states, /cube/pose and /task/success are in, time read from the
+    /// states' stamps:
     /// the expert sees every period's state whatever the machine's load, so its motion repeats
     /// for one seed, as fast as the machine goes.
     #[arg(long, conflicts_with_all = ["sim_time", "rate", "no_reset"])]

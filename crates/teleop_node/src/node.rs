@@ -19,6 +19,7 @@ use so101_core::{
 };
 use so101_core::{expert::ExpertConfig, robot::follow};
 use so101_msgs::{
+    builtin_interfaces::Time,
     geometry_msgs::PoseStamped,
     sensor_msgs::JointState,
     std_msgs::{Bool, Header, String as RosString},
@@ -111,10 +112,14 @@ impl Topics {
         taken
     }
 
-    fn publish_targets(&self, targets: &JointPositions) -> bool {
+    /// Publishes the targets, stamped `stamp` (seconds; 0 leaves the stamp unset).
+    fn publish_targets(&self, targets: &JointPositions, stamp: f64) -> bool {
         self.commands
             .publish(JointState {
-                header: Header::default(),
+                header: Header {
+                    stamp: Time::from_secs_f64(stamp),
+                    frame_id: String::new(),
+                },
                 name: JOINT_NAMES.iter().map(|name| name.to_string()).collect(),
                 position: targets.to_vec(),
                 velocity: Vec::new(),
@@ -400,7 +405,11 @@ pub fn run(args: Args) -> Result<()> {
                     &mut warnings,
                 );
                 targets = Some(next);
-                stepped = topics.publish_targets(&next);
+                // In lockstep a command is the period that starts at the state it answers: its
+                // stamp says which, so the converter need not guess from arrival times. The nodes
+                // act on arrival whatever the stamp; a timed clock leaves it unset.
+                let stamp = if in_lockstep { now } else { 0.0 };
+                stepped = topics.publish_targets(&next, stamp);
                 if !stepped {
                     if let Some(suppressed) = warnings.check(Instant::now()) {
                         tracing::warn!(suppressed, "publishing /joint_commands failed");

@@ -279,8 +279,8 @@ def _read_files(path: Path, files: list[Path], cameras: list[str] | None, report
     """The episode's streams out of `files` (read_episode's first pass), without its metadata."""
 
     raw_states: list[tuple[float, float, np.ndarray]] = []  # (receive time, stamp, positions)
-    # (receive time, topic order, targets or the reason the nodes reject the message)
-    raw_commands: list[tuple[float, int, object]] = []
+    # (receive time, topic order, targets or the reason the nodes reject the message, stamp: 0 for none)
+    raw_commands: list[tuple[float, int, object, float]] = []
     raw_reward: list[tuple[float, float]] = []
     raw_success: list[tuple[float, bool]] = []
     raw_cube: list[tuple[float, np.ndarray]] = []
@@ -324,7 +324,7 @@ def _read_files(path: Path, files: list[Path], cameras: list[str] | None, report
                         targets = targets_from_joint_state(list(ros.name), list(ros.position))
                 except CommandError as error:
                     targets = f"{topic}: {error}"
-                raw_commands.append((received, int(array), targets))
+                raw_commands.append((received, int(array), targets, 0.0 if array else _stamp(ros.header)))
             elif topic.endswith("/" + contract.TASK_REWARD):
                 raw_reward.append((received, float(decode(record.data).data)))
             elif topic.endswith("/" + contract.TASK_SUCCESS):
@@ -341,8 +341,8 @@ def _read_files(path: Path, files: list[Path], cameras: list[str] | None, report
     if len(raw_states) < 2:
         raise BagError(f"{path.name}: no /joint_states (observation.state); {report.foreign_topics()}{cut}")
     raw_commands.sort(key=lambda entry: (entry[0], entry[1]))
-    accepted = [(t, c) for t, _, c in raw_commands if not isinstance(c, str)]
-    reasons = [c for _, _, c in raw_commands if isinstance(c, str)]
+    accepted = [(t, c, stamp) for t, _, c, stamp in raw_commands if not isinstance(c, str)]
+    reasons = [c for _, _, c, _ in raw_commands if isinstance(c, str)]
     if not accepted:
         detail = f" ({len(reasons)} rejected, e.g. {reasons[0]})" if reasons else ""
         raise BagError(f"{path.name}: no valid /joint_commands or /forward_position_controller/commands (action){detail}{cut}")
@@ -354,7 +354,7 @@ def _read_files(path: Path, files: list[Path], cameras: list[str] | None, report
         if name not in camera_topics:
             raise BagError(f"{path.name}: no frames of camera {name!r}")
 
-    from .resample import WallToSim
+    from .resample import WallToSim, command_times
 
     to_sim = WallToSim([r for r, _, _ in raw_states], [s for _, s, _ in raw_states])
 
@@ -365,9 +365,10 @@ def _read_files(path: Path, files: list[Path], cameras: list[str] | None, report
 
     # The robot held its measured position until the first command (so101.dataset.commands).
     raw_states.sort(key=lambda entry: entry[1])
-    first_command = float(to_sim([accepted[0][0]])[0])
+    placed = command_times(to_sim([t for t, _, _ in accepted]), np.array([stamp for _, _, stamp in accepted]))
+    first_command = float(placed.min())
     held = [p for _, s, p in raw_states if s <= first_command + 1e-9] or [raw_states[0][2]]
-    targets = obeyed_targets([c for _, c in accepted], held[-1])
+    targets = obeyed_targets([c for _, c, _ in accepted], held[-1])
 
     return Episode(
         path=path,
@@ -375,7 +376,7 @@ def _read_files(path: Path, files: list[Path], cameras: list[str] | None, report
         success=None,
         seed="",
         joint_states=stream([(s, p) for _, s, p in raw_states], stamped=True),
-        joint_commands=stream([(t, target) for (t, _), target in zip(accepted, targets)]),
+        joint_commands=stream(list(zip(placed.tolist(), targets)), stamped=True),
         reward=stream(raw_reward),
         task_success=stream(raw_success),
         cube_pose=stream(raw_cube, stamped=True),

@@ -61,6 +61,26 @@ class WallToSim:
         return np.interp(np.asarray(wall_times, dtype=np.float64), self.wall, self.sim)
 
 
+# A command's own stamp places it when it lies this close to the sim time of its arrival: up to 1 s
+# before (a node that stamps what it sends, a lockstep period that answers a state), up to 0.1 s
+# after (the recorder takes each topic on its own, so a command may come in a moment before the
+# state it answers). Anything else is another clock (a wall-clock stamp against a sim) or none.
+STAMP_BEFORE_ARRIVAL_S = 1.0
+STAMP_AFTER_ARRIVAL_S = 0.1
+
+
+def command_times(arrivals: np.ndarray, stamps: np.ndarray) -> np.ndarray:
+    """Sim time of each command: its stamp where it has one near its arrival's sim time (see
+    above), else its arrival. teleop_node in lockstep stamps each command with the state it
+    answers, the start of the period it acts in: placed by arrival instead, a command that came in
+    after the middle of its period landed a frame late, as the machine's load decided."""
+    arrivals = np.asarray(arrivals, dtype=np.float64)
+    stamps = np.asarray(stamps, dtype=np.float64)
+    ahead = stamps - arrivals
+    trusted = (stamps > 0) & (ahead >= -STAMP_BEFORE_ARRIVAL_S) & (ahead <= STAMP_AFTER_ARRIVAL_S)
+    return np.where(trusted, stamps, arrivals)
+
+
 def gaps(streams: dict[str, list[float]], max_gap: float) -> list[tuple[str, float, float]]:
     """(stream, last time before, first time after) of every silence longer than `max_gap` between
     two consecutive messages of a stream, by start time."""
