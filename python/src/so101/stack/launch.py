@@ -76,6 +76,8 @@ class Launch:
         self.prefix = "/" + namespace.strip("/") if namespace.strip("/") else ""
         self.running: list[Running] = []
         self._graph = None
+        # The episodes reported (watch, report_episodes); None until watch first looks.
+        self.reported: set[Path] | None = None
 
     # ------------------------------------------------------------------ readiness
     def graph_node(self):
@@ -180,22 +182,30 @@ class Launch:
         record_session.SessionRunner, has recorded its episodes). Meanwhile reports each episode
         the recorder closes in `bags`."""
         # Episodes already there (an earlier run's) are not this run's.
-        reported: set[Path] = (
-            set(bags.glob(f"{contract.EPISODE_DEFAULT_PREFIX}_*/{contract.EPISODE_METADATA_FILE}")) if bags is not None else set()
-        )
+        if self.reported is None:
+            self.reported = (
+                set(bags.glob(f"{contract.EPISODE_DEFAULT_PREFIX}_*/{contract.EPISODE_METADATA_FILE}"))
+                if bags is not None
+                else set()
+            )
         while self.running:
-            if bags is not None:
-                report_closed_episodes(bags, reported)
+            self.report_episodes(bags)
             for entry in self.running:
                 if entry.process.poll() is not None:
-                    if bags is not None:
-                        report_closed_episodes(bags, reported)
+                    self.report_episodes(bags)
                     return entry
             if session is not None and session.poll():
                 return None
             # A session's keys and episode ends want a quicker look than the nodes and the bags do.
             time.sleep(0.05 if session is not None else 0.2)
         return None
+
+    def report_episodes(self, bags: Path | None) -> None:
+        """Reports the episodes closed in `bags` since the last look (none before watch). After
+        stop_all, those the recorder closed on its way out: the expert's node ends the run right
+        after its last stop event, and a busy recorder may write that episode's metadata after."""
+        if bags is not None and self.reported is not None:
+            report_closed_episodes(bags, self.reported)
 
 
 def report_closed_episodes(bags: Path, reported: set[Path]) -> None:
@@ -400,6 +410,7 @@ def main(argv: list[str] | None = None) -> int:
         if keys is not None:
             keys.close()
         launch.stop_all()
+        launch.report_episodes(Path(args.bags) if args.record else None)
     for entry in launch.running:
         code = entry.process.returncode
         if entry.stopped_by_us and code not in (0, -signal.SIGINT):
