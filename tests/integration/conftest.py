@@ -139,15 +139,6 @@ def sim_factory(request: pytest.FixtureRequest, tmp_path: Path):
         pytest.fail("\n\n".join(problems), pytrace=False)
 
 
-# Modules of several minutes each, started first: pytest-xdist (--dist loadfile) hands files out in
-# collection order, and one left for last runs on alone after the other worker has finished.
-LONG_MODULES = ("test_vla.py",)
-
-
-def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
-    items.sort(key=lambda item: item.path.name not in LONG_MODULES)  # stable: the rest keep their order
-
-
 @pytest.hookimpl(wrapper=True)
 def pytest_runtest_makereport(item: pytest.Item, call: pytest.CallInfo):
     """Attach the output of every node of a failed test to its report."""

@@ -672,6 +672,15 @@ def run_offline(argv: list, timeout: float, home: Path) -> subprocess.CompletedP
     return run_or_dump_stacks(argv, timeout, offline_env(home))
 
 
+def so101_learn(*argv: str, timeout: float) -> subprocess.CompletedProcess:
+    """`so101-learn ARGV...` offline (no Hub, no Weights & Biases); the test fails with its output
+    when it does."""
+    env = {**os.environ, "HF_HUB_OFFLINE": "1", "WANDB_MODE": "disabled"}
+    done = run_or_dump_stacks([Path(sys.executable).parent / "so101-learn", *argv], timeout, env)
+    assert done.returncode == 0, done.stdout[-3000:] + done.stderr[-3000:]
+    return done
+
+
 def run_or_dump_stacks(argv: list, timeout: float, env: dict[str, str]) -> subprocess.CompletedProcess:
     """A command, its output captured. When it runs over `timeout`, every Python process of it prints
     its threads' stacks (faulthandler, on SIGABRT) and the test fails with them: a hang on a CI

@@ -3,28 +3,18 @@ episodes through the stack (launcher, sim node, teleop_node's expert, recorder) 
 `so101-learn act` / `diffusion` train on that dataset with lerobot-train (a few steps, shrunk
 networks) and evaluate the policy through so101-run-policy in lockstep with the sim node. What a
 user reads is checked: the dataset LeRobot loads (with the cube's pose), the checkpoint, the
-evaluation's eval_info.json with its 95 % interval, and the summaries."""
+evaluation's eval_info.json with its 95 % interval, and the summaries. The camera recipe:
+test_learn_cameras.py."""
 
 from __future__ import annotations
 
 import json
 import os
 import shutil
-import subprocess
-import sys
 from pathlib import Path
 
 import pytest
-from harness import run_or_dump_stacks
-
-VENV_BIN = Path(sys.executable).parent
-
-
-def learn(*argv: str, timeout: float) -> subprocess.CompletedProcess:
-    env = {**os.environ, "HF_HUB_OFFLINE": "1", "WANDB_MODE": "disabled"}
-    done = run_or_dump_stacks([VENV_BIN / "so101-learn", *argv], timeout, env)
-    assert done.returncode == 0, done.stdout[-3000:] + done.stderr[-3000:]
-    return done
+from harness import so101_learn as learn
 
 
 @pytest.fixture(scope="module")
@@ -185,89 +175,3 @@ def assert_actions_within_the_samplers_clip_range(checkpoint: Path, config: dict
     normalised = StackPolicy(str(checkpoint), device="cpu").preprocessor(batch)["action"]
     assert config["clip_sample"]
     assert float(normalised.abs().max()) <= config["clip_sample_range"] + 1e-5, normalised.abs().max(dim=0)
-
-
-@pytest.fixture(scope="module")
-def camera_demos(tmp_path_factory) -> Path:
-    """Two expert episodes seen by two small cameras, without the cube's pose (as on a real arm)."""
-    output = tmp_path_factory.mktemp("camera_demos")
-    argv = ["demos", "--episodes", "2", "--seed", "3", "--lite", "--cameras", "top:32x24,wrist:32x24"]
-    done = learn(*argv, "--no-environment-state", "--output", str(output), timeout=240)
-    assert "Summary: 2 demonstration(s) recorded" in done.stdout, done.stdout
-    return output / "dataset"
-
-
-def test_the_camera_recipe_trains_from_scratch_with_augmentation_and_evaluates_both_ways(camera_demos, tmp_path):
-    output = tmp_path / "act"
-    tiny = ["--policy.dim_model=32", "--policy.n_heads=2", "--policy.dim_feedforward=64", "--policy.n_encoder_layers=1"]
-    argv = ["act", "--dataset", str(camera_demos), "--steps", "3", "--batch-size", "4", "--output", str(output)]
-    # Every augmentation set, through lerobot-train's parser and LeRobot's loader.
-    argv += ["--augment", "colour,shift,blur,noise"]
-    argv += ["--eval", "1", "--eval-videos", "1", "--quiet"] + [f"--policy-arg={arg}" for arg in tiny]
-    done = learn(*argv, timeout=400)
-
-    checkpoint = output / "checkpoints" / "last" / "pretrained_model"
-    config = json.loads((checkpoint / "config.json").read_text())
-    inputs = config["input_features"]
-    assert {"observation.images.top", "observation.images.wrist", "observation.state"} == set(inputs), inputs
-    assert inputs["observation.images.top"]["shape"] == [3, 24, 32]
-    # The backbone learnt from scratch: nothing was (or could be) downloaded.
-    assert config["pretrained_backbone_weights"] is None
-    transforms = json.loads((checkpoint / "train_config.json").read_text())["dataset"]["image_transforms"]
-    assert transforms["enable"] and "affine" not in transforms["tfs"] and "brightness" in transforms["tfs"]
-    assert transforms["tfs"]["shift"]["type"] == "RandomAffine" and transforms["tfs"]["shift"]["kwargs"]["translate"] == [
-        0.02,
-        0.02,
-    ]
-    assert {"blur", "noise"} <= set(transforms["tfs"])
-
-    info = json.loads((output / "eval" / "eval_info.json").read_text())
-    assert info["aggregated"]["episodes"] == 1 and "success:" in done.stdout
-    import av
-
-    with av.open(info["per_episode"][0]["video"]) as container:
-        frame = next(container.decode(video=0)).to_ndarray(format="rgb24")
-    # The policy's two 32x24 cameras side by side, enlarged to a watchable height (x15: 360 rows).
-    assert frame.shape == (360, 960, 3), frame.shape
-
-    # The same policy through LeRobot's own evaluation, on the env type with the same cameras.
-    evaluation = tmp_path / "lerobot_eval"
-    command = [
-        str(VENV_BIN / "lerobot-eval"),
-        f"--policy.path={checkpoint}",
-        "--policy.device=cpu",
-        "--env.type=so101_sim",
-        "--env.cameras={top: [24, 32], wrist: [24, 32]}",
-        "--env.environment_state=false",
-        "--env.episode_length=8",
-        "--eval.n_episodes=1",
-        "--eval.batch_size=1",
-        "--eval.use_async_envs=false",
-        f"--output_dir={evaluation}",
-    ]
-    env = {**os.environ, "HF_HUB_OFFLINE": "1", "WANDB_MODE": "disabled"}
-    done = subprocess.run(command, capture_output=True, text=True, timeout=300, env=env)
-    assert done.returncode == 0, (done.stdout + done.stderr)[-4000:]
-    overall = json.loads((evaluation / "eval_info.json").read_text())["overall"]
-    assert overall["n_episodes"] == 1 and overall["pc_success"] == 0.0  # 8 steps cannot reach the bin
-
-
-def test_the_gpu_recipe_at_the_main_jobs_640x480_takes_a_few_steps_on_the_cpu(camera_demos, tmp_path):
-    """The recipe docs/learning.md gives for a GPU, on images of the main job's size: the camera
-    demos' first bag converted at 640x480 (enlarged: the shape is what counts here, not the content;
-    one camera of the two, as the cost of both is twice the time for the same check), then the same
-    `so101-learn act` for two steps on the CPU."""
-    dataset = tmp_path / "dataset640"
-    # One episode is enough for two steps of training (conversion at 640x480 is what takes the time).
-    episode = camera_demos.parent / "bags" / "episode_000000"
-    command = [str(VENV_BIN / "so101-bag-to-lerobot"), str(episode), "--output", str(dataset)]
-    command += ["--image-size", "640x480", "--cameras", "top", "--no-environment-state", "--quiet"]
-    done = subprocess.run(command, capture_output=True, text=True, timeout=300)
-    assert done.returncode == 0, (done.stdout + done.stderr)[-3000:]
-    output = tmp_path / "act640"
-    learn(
-        "act", "--dataset", str(dataset), "--steps", "2", "--batch-size", "2", "--eval", "0", "--output", str(output), timeout=400
-    )
-    config = json.loads((output / "checkpoints" / "last" / "pretrained_model" / "config.json").read_text())
-    assert config["input_features"]["observation.images.top"]["shape"] == [3, 480, 640]
-    assert config["pretrained_backbone_weights"] is None
