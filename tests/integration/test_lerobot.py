@@ -144,13 +144,16 @@ def test_expert_bags_become_a_lerobot_dataset_that_lerobot_loads_and_replays(
             assert np.linalg.norm(final[:3] - first[:3]) > 0.05, "the cube did not move in the environment state"
 
     # Replayed on a fresh sim with the same seed (its k-th /sim/reset puts the cube where the k-th
-    # episode had it), a successful episode's actions put the cube in the bin again.
+    # episode had it), a successful episode's actions put the cube in the bin again. In lockstep,
+    # one sim period per frame: in real time, beside a training, a replay once missed the bin.
     from std_msgs.msg import Bool
     from std_srvs.srv import Trigger
 
     assert any(verdicts), "the expert failed both episodes"
     replayed = verdicts.index(True)
-    replay_sim = sim_factory("--seed", "3", "--cameras", "none", "--namespace", "replay")
+    replay_sim = sim_factory(
+        "--seed", "3", "--cameras", "none", "--namespace", "replay", "--lockstep", "--step-on-command", "--rate", "30"
+    )  # fmt: skip
     for _ in range(replayed):  # the draws of the episodes before it
         assert ros.call(Trigger, "/replay/sim/reset", sim=replay_sim).success
     success = ros.subscribe("/replay/task/success", Bool, best_effort_qos())
@@ -167,6 +170,7 @@ def test_expert_bags_become_a_lerobot_dataset_that_lerobot_loads_and_replays(
             "replay",
             "--ramp",
             "1",
+            "--lockstep",
         ],
         capture_output=True,
         text=True,

@@ -3,6 +3,10 @@ bag, to the arm (the sim or the real driver) on /joint_commands, at their record
 
 The arm is first brought from where it is to the episode's first action in --ramp seconds, so
 the replay never starts with a jump. Run it inside scripts/isolated with the arm's node.
+
+With --lockstep (a dataset on the sim node started with --lockstep --step-on-command --rate FPS,
+the dataset's fps), each action is one period of the sim, the next sent once that period's state
+is in: the replay's physics is then the same whatever the machine's load.
 """
 
 from __future__ import annotations
@@ -17,6 +21,14 @@ import numpy as np
 from .. import contract
 from ..units import JOINT_NAMES, radians_from_lerobot
 from .rclpy_wait import spin_until
+
+# Lockstep: how long a step's state may take to come back, and how long the last action is held
+# after the episode (a sim in real time goes on by itself: a released cube still has to fall).
+STEP_TIMEOUT_S = 5.0
+HOLD_AFTER_S = 1.0
+# A sim period further than this from the dataset's frame period is refused (one 2 ms physics step,
+# the sim's own rounding, and some).
+PERIOD_TOLERANCE_S = 0.0025
 
 
 def actions_from_dataset(root: Path, repo_id: str, episode: int, units: str) -> tuple[np.ndarray, np.ndarray]:
@@ -51,6 +63,36 @@ def actions_from_bag(path: Path) -> tuple[np.ndarray, np.ndarray]:
     return times - times[0], np.stack(episode.joint_commands.values)
 
 
+def stamp_seconds(state) -> float:
+    return state.header.stamp.sec + state.header.stamp.nanosec * 1e-9
+
+
+class LockstepSender:
+    """Sends one action per sim period and waits for the state it leads to (newer stamp); refuses
+    a sim whose period is not the dataset's frame period (another --rate)."""
+
+    def __init__(self, node, send, latest: dict, frame: float):
+        self.node, self.send, self.latest, self.frame = node, send, latest, frame
+        self.last = stamp_seconds(latest["state"])
+        self.checked = False
+
+    def __call__(self, action: np.ndarray) -> None:
+        self.send(action)
+        if not spin_until(self.node, lambda: stamp_seconds(self.latest["state"]) > self.last, STEP_TIMEOUT_S):
+            raise SystemExit(
+                f"so101-replay: no state came back within {STEP_TIMEOUT_S:g} s of a command: is the sim in "
+                "--lockstep --step-on-command?"
+            )
+        now = stamp_seconds(self.latest["state"])
+        if not self.checked and abs(now - self.last - self.frame) > PERIOD_TOLERANCE_S:
+            raise SystemExit(
+                f"so101-replay: the sim stepped {now - self.last:.4f} s per command, the dataset's frames are "
+                f"{self.frame:.4f} s apart: start the sim with --rate {1 / self.frame:g}"
+            )
+        self.checked = True
+        self.last = now
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(
         prog="so101-replay", description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
@@ -62,10 +104,19 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--namespace", default="", help="the arm's namespace (topics under /NAMESPACE/)")
     parser.add_argument("--ramp", type=float, default=2.0, help="seconds to move to the first action")
     parser.add_argument("--reset", action="store_true", help="call /sim/reset first (simulation)")
+    parser.add_argument(
+        "--lockstep",
+        action="store_true",
+        help="a dataset on a sim started with --lockstep --step-on-command --rate FPS (the dataset's fps): one sim "
+        "period per action, the next sent once its state is in, so the replay does not depend on the machine's load; "
+        f"the last action is then held {HOLD_AFTER_S:g} s",
+    )
     args = parser.parse_args(argv)
 
     if (args.source / "meta" / "info.json").is_file():
         offsets, actions = actions_from_dataset(args.source, args.repo_id, args.episode, args.units)
+    elif args.lockstep:
+        parser.error("--lockstep replays a dataset (one frame per sim period), not a bag's commands at their arrival times")
     else:
         offsets, actions = actions_from_bag(args.source)
 
@@ -88,9 +139,14 @@ def main(argv: list[str] | None = None) -> int:
         if args.reset:
             client = node.create_client(Trigger, f"{prefix}/{contract.SIM_RESET}")
             wait_for(client.service_is_ready, 20.0, "/sim/reset service")
+            # A sim in lockstep publishes the new episode's state once, before it answers; one in
+            # real time goes on publishing, the state before the reset too.
+            if args.lockstep:
+                latest.clear()
             future = client.call_async(Trigger.Request())
             wait_for(future.done, 10.0, "/sim/reset answer")
-            latest.clear()
+            if not args.lockstep:
+                latest.clear()
         wait_for(lambda: "state" in latest, 20.0, "/joint_states")
         wait_for(lambda: publisher.get_subscription_count() > 0, 20.0, "subscriber of /joint_commands")
         positions = dict(zip(latest["state"].name, latest["state"].position))
@@ -99,17 +155,26 @@ def main(argv: list[str] | None = None) -> int:
         def send(values: np.ndarray):
             publisher.publish(JointState(name=JOINT_NAMES, position=[float(v) for v in values]))
 
-        period = 1.0 / 50
-        ramp_steps = max(1, int(args.ramp / period))
-        begun = time.monotonic()
-        for k in range(1, ramp_steps + 1):
-            send(start + (actions[0] - start) * k / ramp_steps)
-            rclpy.spin_once(node, timeout_sec=max(0.0, begun + k * period - time.monotonic()))
-        begun = time.monotonic()
-        for offset, action in zip(offsets, actions):
-            while (wait := begun + offset - time.monotonic()) > 0:
-                rclpy.spin_once(node, timeout_sec=wait)
-            send(action)
+        if args.lockstep:
+            frame = float(offsets[1] - offsets[0]) if len(offsets) > 1 else 1 / 30
+            count = max(1, round(args.ramp / frame))
+            ramp = [start + (actions[0] - start) * k / count for k in range(1, count + 1)]
+            hold = [actions[-1]] * round(HOLD_AFTER_S / frame)
+            step = LockstepSender(node, send, latest, frame)
+            for action in [*ramp, *actions, *hold]:
+                step(action)
+        else:
+            period = 1.0 / 50
+            ramp_steps = max(1, int(args.ramp / period))
+            begun = time.monotonic()
+            for k in range(1, ramp_steps + 1):
+                send(start + (actions[0] - start) * k / ramp_steps)
+                rclpy.spin_once(node, timeout_sec=max(0.0, begun + k * period - time.monotonic()))
+            begun = time.monotonic()
+            for offset, action in zip(offsets, actions):
+                while (wait := begun + offset - time.monotonic()) > 0:
+                    rclpy.spin_once(node, timeout_sec=wait)
+                send(action)
         print(f"replayed {len(actions)} actions over {offsets[-1]:.1f} s")
     finally:
         node.destroy_node()
