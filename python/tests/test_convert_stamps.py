@@ -1,7 +1,8 @@
-"""Where the converter puts a command (so101.dataset.resample.command_times): by its stamp when it
-has one near its arrival, as teleop_node's lockstep commands do, else by its arrival. A lockstep
-period's command that comes in late in its period still lands on the frame of the state it
-answers; a stamp from another clock is ignored. Synthetic bags (tests/bag_writer.py), no DDS."""
+"""Where the converter puts a command (so101.dataset.resample.command_times): by its stamp when that
+is the stamp of a recorded joint state near its arrival, as teleop_node's lockstep commands have
+it, else by its arrival. A lockstep period's command that comes in late in its period still
+lands on the frame of the state it answers; a stamp from another clock, or a publisher's own
+publish time, is ignored. Synthetic bags (tests/bag_writer.py), no DDS."""
 
 from __future__ import annotations
 
@@ -59,7 +60,11 @@ def test_a_lockstep_command_lands_on_the_frame_of_the_state_it_answers(tmp_path)
     np.testing.assert_allclose(action - state, AHEAD, atol=1e-4)
 
 
-@pytest.mark.parametrize("stamp_of", [lambda t: 0.0, lambda t: 1_795_640_370.0 + t], ids=["unstamped", "wall-clock"])
+@pytest.mark.parametrize(
+    "stamp_of",
+    [lambda t: 0.0, lambda t: 1_795_640_370.0 + t, lambda t: t + LATE - 0.005],
+    ids=["unstamped", "wall-clock", "publish-time"],
+)
 def test_a_command_without_a_stamp_of_the_sim_s_clock_is_placed_by_its_arrival(tmp_path, stamp_of):
     state, action = converted(tmp_path, stamp_of)
     # Received after the next frame's instant: each frame holds the command of the state before
@@ -67,7 +72,18 @@ def test_a_command_without_a_stamp_of_the_sim_s_clock_is_placed_by_its_arrival(t
     np.testing.assert_allclose((action - state)[:-1], AHEAD - 0.01, atol=1e-4)
 
 
-def test_a_stamp_is_trusted_only_near_the_arrival():
-    arrivals = np.array([10.0, 10.0, 10.0, 10.0, 10.0, 10.0])
-    stamps = np.array([9.95, 9.2, 10.05, 0.0, 8.5, 10.5])
-    np.testing.assert_allclose(command_times(arrivals, stamps), [9.95, 9.2, 10.05, 10.0, 10.0, 10.0])
+def test_a_stamp_is_trusted_only_when_it_is_a_state_s_near_the_arrival():
+    states = [8.5, 9.2, 9.95, 10.05, 10.5]
+    arrivals = np.full(7, 10.0)
+    stamps = np.array([9.95, 9.2, 10.05, 0.0, 8.5, 10.5, 9.97])
+    # a state's, 1 s before to 0.1 s after the arrival; none; too early; too late; not a state's
+    expected = [9.95, 9.2, 10.05, 10.0, 10.0, 10.0, 10.0]
+    for index, (arrival, stamp, placed) in enumerate(zip(arrivals, stamps, expected)):
+        assert command_times([arrival], [stamp], states)[0] == placed, index
+
+
+def test_a_command_is_never_placed_before_one_that_came_in_earlier():
+    # An unstamped command, then a partial one stamped with a state 0.5 s before its arrival: the
+    # robot obeyed them in that order, so the second does not move ahead of the first.
+    placed = command_times([9.9, 10.0], [0.0, 9.5], [9.5, 9.9])
+    np.testing.assert_allclose(placed, [9.9, 9.9])

@@ -365,8 +365,10 @@ def _read_files(path: Path, files: list[Path], cameras: list[str] | None, report
 
     # The robot held its measured position until the first command (so101.dataset.commands).
     raw_states.sort(key=lambda entry: entry[1])
-    placed = command_times(to_sim([t for t, _, _ in accepted]), np.array([stamp for _, _, stamp in accepted]))
-    first_command = float(placed.min())
+    placed = command_times(
+        to_sim([t for t, _, _ in accepted]), np.array([stamp for _, _, stamp in accepted]), [s for _, s, _ in raw_states]
+    )
+    first_command = float(placed[0])
     held = [p for _, s, p in raw_states if s <= first_command + 1e-9] or [raw_states[0][2]]
     targets = obeyed_targets([c for _, c, _ in accepted], held[-1])
 

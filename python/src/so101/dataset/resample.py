@@ -61,24 +61,33 @@ class WallToSim:
         return np.interp(np.asarray(wall_times, dtype=np.float64), self.wall, self.sim)
 
 
-# A command's own stamp places it when it lies this close to the sim time of its arrival: up to 1 s
-# before (a node that stamps what it sends, a lockstep period that answers a state), up to 0.1 s
-# after (the recorder takes each topic on its own, so a command may come in a moment before the
-# state it answers). Anything else is another clock (a wall-clock stamp against a sim) or none.
+# A command's own stamp places it when it is the stamp of a recorded joint state (the state it
+# answers: teleop_node's lockstep commands) lying near the command's arrival: up to 1 s before, up
+# to 0.1 s after (the recorder takes each topic on its own, so a command may come in a moment before
+# the state it answers). A stamp of the publisher's own clock (its publish time) is none of these.
 STAMP_BEFORE_ARRIVAL_S = 1.0
 STAMP_AFTER_ARRIVAL_S = 0.1
+SAME_STAMP_S = 1e-6
 
 
-def command_times(arrivals: np.ndarray, stamps: np.ndarray) -> np.ndarray:
-    """Sim time of each command: its stamp where it has one near its arrival's sim time (see
-    above), else its arrival. teleop_node in lockstep stamps each command with the state it
-    answers, the start of the period it acts in: placed by arrival instead, a command that came in
-    after the middle of its period landed a frame late, as the machine's load decided."""
+def command_times(arrivals: np.ndarray, stamps: np.ndarray, state_stamps: np.ndarray) -> np.ndarray:
+    """Sim time of each command, given in arrival order: its stamp where that is a recorded
+    state's (above), else its arrival; never earlier than a command that arrived before it (the
+    robot obeyed them in that order). Placed by arrival, a lockstep command that came in after the
+    middle of its period landed a frame late, as the machine's load decided."""
     arrivals = np.asarray(arrivals, dtype=np.float64)
     stamps = np.asarray(stamps, dtype=np.float64)
+    known = np.sort(np.asarray(state_stamps, dtype=np.float64))
+    if len(known):
+        after = np.clip(np.searchsorted(known, stamps), 0, len(known) - 1)
+        before = np.clip(after - 1, 0, len(known) - 1)
+        on_state = np.minimum(np.abs(known[after] - stamps), np.abs(known[before] - stamps)) <= SAME_STAMP_S
+    else:
+        on_state = np.zeros(len(stamps), dtype=bool)
     ahead = stamps - arrivals
-    trusted = (stamps > 0) & (ahead >= -STAMP_BEFORE_ARRIVAL_S) & (ahead <= STAMP_AFTER_ARRIVAL_S)
-    return np.where(trusted, stamps, arrivals)
+    trusted = (stamps > 0) & on_state & (ahead >= -STAMP_BEFORE_ARRIVAL_S) & (ahead <= STAMP_AFTER_ARRIVAL_S)
+    placed = np.where(trusted, stamps, arrivals)
+    return np.maximum.accumulate(placed) if len(placed) else placed
 
 
 def gaps(streams: dict[str, list[float]], max_gap: float) -> list[tuple[str, float, float]]:
