@@ -40,6 +40,7 @@ def test_an_episode_the_recorder_closes_after_the_run_ended_is_reported(tmp_path
     expert = f"import os; os.replace({str(episodes[0] / 'metadata.closing')!r}, {str(episodes[0] / 'metadata.yaml')!r})"
 
     launch = Launch(tmp_path, ready_timeout=20.0, stop_timeout=20.0, namespace="")
+    launch.remember_earlier_episodes(bags)  # as so101-launch does before it starts the nodes
     ready = tmp_path / "recorder.ready"
     env = dict(os.environ)
     launch.start(

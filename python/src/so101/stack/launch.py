@@ -76,7 +76,7 @@ class Launch:
         self.prefix = "/" + namespace.strip("/") if namespace.strip("/") else ""
         self.running: list[Running] = []
         self._graph = None
-        # The episodes reported (watch, report_episodes); None until watch first looks.
+        # The episodes reported (watch, report_episodes) or an earlier run's; None until looked at.
         self.reported: set[Path] | None = None
 
     # ------------------------------------------------------------------ readiness
@@ -181,13 +181,8 @@ class Launch:
         """Until a node exits; returns it (None when none is left, or when `session`, a
         record_session.SessionRunner, has recorded its episodes). Meanwhile reports each episode
         the recorder closes in `bags`."""
-        # Episodes already there (an earlier run's) are not this run's.
         if self.reported is None:
-            self.reported = (
-                set(bags.glob(f"{contract.EPISODE_DEFAULT_PREFIX}_*/{contract.EPISODE_METADATA_FILE}"))
-                if bags is not None
-                else set()
-            )
+            self.remember_earlier_episodes(bags)
         while self.running:
             self.report_episodes(bags)
             for entry in self.running:
@@ -199,6 +194,12 @@ class Launch:
             # A session's keys and episode ends want a quicker look than the nodes and the bags do.
             time.sleep(0.05 if session is not None else 0.2)
         return None
+
+    def remember_earlier_episodes(self, bags: Path | None) -> None:
+        """Episodes already in `bags` are an earlier run's, never reported. Called before the nodes
+        start: an episode closed between their start and watch's first look is this run's."""
+        pattern = f"{contract.EPISODE_DEFAULT_PREFIX}_*/{contract.EPISODE_METADATA_FILE}"
+        self.reported = set(bags.glob(pattern)) if bags is not None else set()
 
     def report_episodes(self, bags: Path | None) -> None:
         """Reports the episodes closed in `bags` since the last look (none before watch). After
@@ -377,6 +378,7 @@ def main(argv: list[str] | None = None) -> int:
     signal.signal(signal.SIGTERM, stop_like_ctrl_c)
     signal.signal(signal.SIGHUP, stop_like_ctrl_c)
     status = 0
+    launch.remember_earlier_episodes(Path(args.bags) if args.record else None)
     try:
         for spec in specs:
             launch.start(spec)
