@@ -26,9 +26,14 @@ from .rclpy_wait import spin_until
 # after the episode (a sim in real time goes on by itself: a released cube still has to fall).
 STEP_TIMEOUT_S = 5.0
 HOLD_AFTER_S = 1.0
-# A sim period further than this from the dataset's frame period is refused (one 2 ms physics step,
-# the sim's own rounding, and some).
+# A sim period further than this from the dataset's frame period is refused: at the first step (one
+# 2 ms physics step, the sim's rounding of a rate that does not divide 500 Hz, and some), and on
+# average over the first PERIOD_STEPS steps (where that rounding evens out).
 PERIOD_TOLERANCE_S = 0.0025
+PERIOD_STEPS = 10
+MEAN_PERIOD_TOLERANCE_S = 0.0004
+# After the reset, a sim that publishes a state within this long without a command is not in lockstep.
+OWN_PACE_WAIT_S = 0.3
 
 
 def actions_from_dataset(root: Path, repo_id: str, episode: int, units: str) -> tuple[np.ndarray, np.ndarray]:
@@ -73,8 +78,8 @@ class LockstepSender:
 
     def __init__(self, node, send, latest: dict, frame: float):
         self.node, self.send, self.latest, self.frame = node, send, latest, frame
-        self.last = stamp_seconds(latest["state"])
-        self.checked = False
+        self.first = self.last = stamp_seconds(latest["state"])
+        self.steps = 0
 
     def __call__(self, action: np.ndarray) -> None:
         self.send(action)
@@ -84,13 +89,18 @@ class LockstepSender:
                 "--lockstep --step-on-command?"
             )
         now = stamp_seconds(self.latest["state"])
-        if not self.checked and abs(now - self.last - self.frame) > PERIOD_TOLERANCE_S:
-            raise SystemExit(
-                f"so101-replay: the sim stepped {now - self.last:.4f} s per command, the dataset's frames are "
-                f"{self.frame:.4f} s apart: start the sim with --rate {1 / self.frame:g}"
-            )
-        self.checked = True
+        self.steps += 1
+        if self.steps == 1 and abs(now - self.last - self.frame) > PERIOD_TOLERANCE_S:
+            self.refuse(now - self.last)
+        if self.steps == PERIOD_STEPS and abs((now - self.first) / PERIOD_STEPS - self.frame) > MEAN_PERIOD_TOLERANCE_S:
+            self.refuse((now - self.first) / PERIOD_STEPS)
         self.last = now
+
+    def refuse(self, period: float) -> None:
+        raise SystemExit(
+            f"so101-replay: the sim stepped {period:.4f} s per command, the dataset's frames are {self.frame:.4f} s "
+            f"apart: start the sim with --rate {1 / self.frame:g}"
+        )
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -107,11 +117,13 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument(
         "--lockstep",
         action="store_true",
-        help="a dataset on a sim started with --lockstep --step-on-command --rate FPS (the dataset's fps): one sim "
+        help="with --reset, a dataset on a sim started with --lockstep --step-on-command --rate FPS (the dataset's fps): one sim "
         "period per action, the next sent once its state is in, so the replay does not depend on the machine's load; "
         f"the last action is then held {HOLD_AFTER_S:g} s",
     )
     args = parser.parse_args(argv)
+    if args.lockstep and not args.reset:
+        parser.error("--lockstep needs --reset: a sim in lockstep publishes its state only when it steps or resets")
 
     if (args.source / "meta" / "info.json").is_file():
         offsets, actions = actions_from_dataset(args.source, args.repo_id, args.episode, args.units)
@@ -119,6 +131,8 @@ def main(argv: list[str] | None = None) -> int:
         parser.error("--lockstep replays a dataset (one frame per sim period), not a bag's commands at their arrival times")
     else:
         offsets, actions = actions_from_bag(args.source)
+    if args.lockstep and len(offsets) < 2:
+        parser.error(f"--lockstep: episode {args.episode} has one frame, no frame period to step the sim by")
 
     import rclpy
     from sensor_msgs.msg import JointState
@@ -136,6 +150,11 @@ def main(argv: list[str] | None = None) -> int:
             raise SystemExit(f"so101-replay: no {what} within {timeout:.0f} s (is the arm's node running?)")
 
     try:
+        if args.lockstep:
+            # The sim's one state after the reset reaches only a subscription it has matched.
+            topic = f"{prefix}/{contract.JOINT_STATES}"
+            wait_for(lambda: node.count_publishers(topic) > 0, 20.0, "/joint_states publisher")
+            wait_for(lambda: publisher.get_subscription_count() > 0, 20.0, "subscriber of /joint_commands")
         if args.reset:
             client = node.create_client(Trigger, f"{prefix}/{contract.SIM_RESET}")
             wait_for(client.service_is_ready, 20.0, "/sim/reset service")
@@ -156,7 +175,11 @@ def main(argv: list[str] | None = None) -> int:
             publisher.publish(JointState(name=JOINT_NAMES, position=[float(v) for v in values]))
 
         if args.lockstep:
-            frame = float(offsets[1] - offsets[0]) if len(offsets) > 1 else 1 / 30
+            reset_state = stamp_seconds(latest["state"])
+            spin_until(node, lambda: stamp_seconds(latest["state"]) > reset_state, OWN_PACE_WAIT_S)
+            if stamp_seconds(latest["state"]) > reset_state:
+                raise SystemExit("so101-replay: the sim steps on its own: start it with --lockstep --step-on-command")
+            frame = float(offsets[1] - offsets[0])
             count = max(1, round(args.ramp / frame))
             ramp = [start + (actions[0] - start) * k / count for k in range(1, count + 1)]
             hold = [actions[-1]] * round(HOLD_AFTER_S / frame)
