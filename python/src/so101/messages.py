@@ -10,6 +10,11 @@ import numpy as np
 from .units import JOINT_NAMES
 
 
+def stamp_seconds(message) -> float:
+    """A stamped message's header stamp in seconds (sim time from the sim, ROS time from the arm)."""
+    return message.header.stamp.sec + message.header.stamp.nanosec * 1e-9
+
+
 def joint_positions(msg) -> np.ndarray | None:
     """The six positions (rad) of a sensor_msgs/JointState in contract order, or None when it does
     not name all six (messages may name joints in any order, or only some of them)."""

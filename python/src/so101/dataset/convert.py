@@ -34,7 +34,7 @@ import numpy as np
 
 from .. import contract
 from ..ee import EE_FEATURE_NAMES
-from ..messages import rgb_image
+from ..messages import rgb_image, stamp_seconds
 from ..units import FEATURE_NAMES, lerobot_from_radians
 from .bags import BagError, Episode, camera_frames, episode_dirs, read_episode
 from .ee_columns import with_ee_columns
@@ -263,7 +263,7 @@ def write_part(dataset, frames: Frames, task: str, images, image_size, label: st
                     try:
                         image = rgb_image(message)
                     except ValueError as error:
-                        raise PartError(f"camera {name!r}: the frame at t={stamp_of(message):.3f} s: {error}") from error
+                        raise PartError(f"camera {name!r}: the frame at t={stamp_seconds(message):.3f} s: {error}") from error
                     if image_size:
                         image = resized([image], *image_size)[0]
                     decoded[name] = (ordinal, image)
@@ -283,10 +283,6 @@ def write_part(dataset, frames: Frames, task: str, images, image_size, label: st
             pass
         return f"{label}: {error}"
     return None
-
-
-def stamp_of(message) -> float:
-    return message.header.stamp.sec + message.header.stamp.nanosec * 1e-9
 
 
 SIMULATION_FILE = "meta/so101_simulation.json"

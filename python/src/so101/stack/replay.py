@@ -19,6 +19,7 @@ from pathlib import Path
 import numpy as np
 
 from .. import contract
+from ..messages import stamp_seconds
 from ..units import JOINT_NAMES, radians_from_lerobot
 from .rclpy_wait import spin_until
 
@@ -66,10 +67,6 @@ def actions_from_bag(path: Path) -> tuple[np.ndarray, np.ndarray]:
         raise SystemExit(f"so101-replay: {error}") from error
     times = np.asarray(episode.joint_commands.times)
     return times - times[0], np.stack(episode.joint_commands.values)
-
-
-def stamp_seconds(state) -> float:
-    return state.header.stamp.sec + state.header.stamp.nanosec * 1e-9
 
 
 class LockstepSender:
