@@ -182,7 +182,11 @@ def test_several_processes_train_through_accelerates_launcher(tmp_path):
     ]
     cameras = camera_dataset(tmp_path / "cameras")
     command = lerobot_train.train_command(parse("act", "--dataset", str(cameras), "--num-processes", "2"), tmp_path / "out")
-    assert command[command.index("-m") + 1] == "lerobot.scripts.lerobot_train"
+    assert command[command.index("-m") + 1] == "so101.learn.train_in_memory"
+    reread = parse("act", "--dataset", str(cameras), "--num-processes", "2", "--reread-items")
+    assert (command := lerobot_train.train_command(reread, tmp_path / "out"))[
+        command.index("-m") + 1
+    ] == "lerobot.scripts.lerobot_train"
 
 
 def camera_dataset(root: Path) -> Path:
@@ -192,7 +196,7 @@ def camera_dataset(root: Path) -> Path:
     return root
 
 
-def test_a_dataset_without_cameras_keeps_its_items_in_memory_unless_told(tmp_path):
+def test_every_dataset_keeps_its_items_in_memory_unless_told(tmp_path):
     state = tmp_path / "state"
     write_info(state, {"observation.state": {"dtype": "float32", "shape": [6]}, "action": {"dtype": "float32", "shape": [6]}})
     kept = lerobot_train.train_command(parse("diffusion", "--dataset", str(state)), tmp_path / "o")
@@ -204,8 +208,12 @@ def test_a_dataset_without_cameras_keeps_its_items_in_memory_unless_told(tmp_pat
     assert [a for a in kept[3:] if not a.startswith("--num_workers")] == [
         a for a in reread[1:] if not a.startswith("--num_workers")
     ]
-    cameras = lerobot_train.train_command(parse("act", "--dataset", str(camera_dataset(tmp_path / "cameras"))), tmp_path / "o")
-    assert Path(cameras[0]).name == "lerobot-train" and "--num_workers=1" in cameras
+    # With cameras too, keeping the loader process that applies the augmentation beside the step.
+    with_cameras = camera_dataset(tmp_path / "cameras")
+    cameras = lerobot_train.train_command(parse("act", "--dataset", str(with_cameras)), tmp_path / "o")
+    assert cameras[:3] == [sys.executable, "-m", "so101.learn.train_in_memory"] and "--num_workers=1" in cameras
+    reread = lerobot_train.train_command(parse("act", "--dataset", str(with_cameras), "--reread-items"), tmp_path / "o")
+    assert Path(reread[0]).name == "lerobot-train" and reread[1:] == cameras[3:]
 
 
 def test_a_gpu_gets_more_loader_processes_than_the_cpu(tmp_path, monkeypatch):

@@ -83,6 +83,32 @@ def test_the_camera_recipe_trains_from_scratch_with_augmentation_and_evaluates_b
     assert overall["n_episodes"] == 1 and overall["pc_success"] == 0.0  # 8 steps cannot reach the bin
 
 
+def test_camera_items_kept_in_memory_train_the_very_weights_of_frames_decoded_at_every_step(camera_demos, tmp_path):
+    """The camera recipe keeps each item's decoded frames in memory after its first read and
+    applies the augmentation at every read (so101.learn.train_in_memory): over a pass through the
+    demonstrations and four batches of the next, with the recipe's loader process, training gives
+    the weights lerobot-train itself gives decoding every item at every step (--reread-items)."""
+    from lerobot.datasets.lerobot_dataset import LeRobotDataset
+    from safetensors.torch import load_file
+
+    frames = LeRobotDataset("local/demos", root=camera_demos).num_frames
+    batch = 32
+    steps = frames // batch + 5
+    tiny = ["--policy.dim_model=32", "--policy.n_heads=2", "--policy.dim_feedforward=64", "--policy.n_encoder_layers=1"]
+    argv = ["act", "--dataset", str(camera_demos), "--steps", str(steps), "--batch-size", str(batch), "--eval", "0"]
+    argv += [f"--policy-arg={arg}" for arg in tiny]
+    weights, logs = {}, {}
+    for way, extra in (("memory", []), ("reread", ["--reread-items"])):
+        done = learn(*argv, *extra, "--output", str(tmp_path / way), timeout=400)
+        logs[way] = done.stdout + done.stderr
+        weights[way] = load_file(tmp_path / way / "checkpoints" / "last" / "pretrained_model" / "model.safetensors")
+    assert "-m so101.learn.train_in_memory" in logs["memory"] and "items is kept in memory" in logs["memory"]
+    assert "its image augmentation applied at every read" in logs["memory"] and "--num_workers=1" in logs["memory"]
+    assert "bin/lerobot-train " in logs["reread"] and "kept in memory" not in logs["reread"]
+    differing = [name for name in weights["memory"] if not weights["memory"][name].equal(weights["reread"][name])]
+    assert weights["memory"].keys() == weights["reread"].keys() and not differing, differing
+
+
 def test_the_gpu_recipe_at_the_main_jobs_640x480_takes_a_few_steps_on_the_cpu(camera_demos, tmp_path):
     """The recipe docs/learning.md gives for a GPU, on images of the main job's size: the camera
     demos' first bag converted at 640x480 (enlarged: the shape is what counts here, not the content;

@@ -11,8 +11,8 @@ Variants, each a lever of the recipe reachable from its command line:
 - one-thread: one torch thread (--torch-threads 1) instead of torch's default (every core);
 - inline-loading: the batch loaded in the step (--loader-workers 0): no loader process, so data_s is the whole cost of
   reading and decoding a batch (a dataset with cameras: without them the recipe loads in the step already);
-- reread-items: every item read from the dataset at every step, with a loader process beside the step (--reread-items:
-  lerobot-train's own loading; by default a dataset without cameras keeps its items in memory);
+- reread-items: every item read (and its frames decoded) from the dataset at every step, with a loader process beside
+  the step (--reread-items: lerobot-train's own loading; by default the items stay in memory after their first read);
 - bf16-autocast: bf16 autocast (--policy-arg=--policy.use_amp=true: LeRobot's mixed precision through accelerate).
 channels_last and torch.compile are not among them: lerobot-train has no option for either.
 

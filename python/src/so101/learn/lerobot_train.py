@@ -21,8 +21,10 @@ Why these settings (LeRobot's defaults are sized for images on a GPU: 28 s a ste
   and a quaternion would otherwise dwarf the joints). Diffusion: joints and actions by min-max
   (NORMALIZE_DIFFUSION says why), the cube's pose by mean and std.
 - With cameras (VISION): the backbone from scratch and colour augmentation only.
-- Without cameras, lerobot-train runs through so101.learn.train_in_memory: each item is read
-  once and kept, where reading it each step took twice the model's time (--reread-items: not).
+- lerobot-train runs through so101.learn.train_in_memory: each item is read once and kept (with
+  cameras its augmentation applied at each read), where reading it each step took twice the
+  model's time on the state and decoding the frames took a core beside the camera step; the same
+  weights from the same seed (--reread-items: not).
 --policy-arg passes anything else to lerobot-train (e.g. --policy-arg=--policy.dim_model=512).
 """
 
@@ -174,14 +176,15 @@ def add_arguments(p: argparse.ArgumentParser, name: str) -> None:
         type=int,
         default=None,
         help="dataset loader processes per training process (default: none for a dataset without cameras, whose "
-        "items stay in memory; with cameras 1 on the CPU, where they share the cores with the step, and with "
-        "--device cuda up to 8, as the CPU's cores allow: a GPU waits on decoding otherwise)",
+        "items stay in memory; with cameras 1 on the CPU, which keeps the frames and applies the augmentation beside "
+        "the step, and with --device cuda up to 8, as the CPU's cores allow: a GPU waits on decoding otherwise)",
     )
     p.add_argument(
         "--reread-items",
         action="store_true",
-        help="read each item from the dataset at every step, as lerobot-train does; by default a dataset without "
-        "cameras keeps its items in memory after their first read (so101.learn.train_in_memory)",
+        help="read (and decode) each item from the dataset at every step, as lerobot-train does; by default the "
+        "items are kept in memory after their first read, a camera dataset's when its frames fit in half of the "
+        "memory available (so101.learn.train_in_memory)",
     )
     p.add_argument("--seed", type=int, default=None, help="training seed (default 1000)")
     p.add_argument(
@@ -279,8 +282,9 @@ IN_MEMORY_TRAIN = "so101.learn.train_in_memory"
 
 def can_keep_items(args) -> bool:
     """Whether the run's items may stay in memory (so101.learn.train_in_memory): ACT's or
-    Diffusion's (a VLA's dataset has cameras) on a dataset without cameras."""
-    return args.policy_type in PRESETS and not has_cameras(Path(args.dataset))
+    Diffusion's (a VLA's is lerobot-train's own; so101.learn.vla). A camera dataset's frames must
+    also fit, which the training process checks."""
+    return args.policy_type in PRESETS
 
 
 def items_in_memory(args) -> bool:
@@ -289,7 +293,7 @@ def items_in_memory(args) -> bool:
 
 
 def trainer_module(args) -> str:
-    """The module that trains: lerobot-train's own, or the same keeping a state dataset's items in
+    """The module that trains: lerobot-train's own, or the same keeping the dataset's items in
     memory (a Diffusion step on 50 demonstrations: 3x faster on this CPU, docs/benchmarks.md)."""
     return IN_MEMORY_TRAIN if items_in_memory(args) else LEROBOT_TRAIN
 
@@ -309,11 +313,12 @@ def loader_workers(args) -> int:
     """On the CPU one loader process beside the training overlaps reading the next batch with the
     step; a GPU's step is short enough that decoding is the bottleneck (measured on an H100: 14.7
     steps/s bound by loading, 34 ms for the model step), so it gets as many as the cores allow.
-    Items kept in memory need none: each is read once, then costs nothing (a loader process would
-    keep copies of its own)."""
+    State items kept in memory need none: each is read once, then costs nothing (a loader process
+    would keep copies of its own). A camera dataset's kept items keep their loader process: it
+    applies the augmentation beside the step, and the same loaders give the same weights."""
     if args.loader_workers is not None:
         return args.loader_workers
-    if items_in_memory(args):
+    if items_in_memory(args) and not has_cameras(Path(args.dataset)):
         return 0
     if args.device.startswith("cuda"):
         return max(1, min(8, (os.cpu_count() or 2) // max(1, args.num_processes) - 1))
@@ -445,7 +450,8 @@ def resume_loading(args, checkpoint: Checkpoint) -> None:
     if args.reread_items and can_keep_items(args):
         print(
             f"so101-learn {args.policy_type}: the checkpoint does not say its run kept its items in memory (a run with "
-            "--reread-items, or one started before 2026-11-29, 04:36 UTC): it resumes with lerobot-train's loading",
+            "--reread-items, one whose frames did not fit, one started before 2026-11-29, 04:36 UTC, or a camera run "
+            "started before 2026-11-29, 12:15 UTC): it resumes with lerobot-train's loading",
             flush=True,
         )
     same_place = args.device == checkpoint.config["policy"]["device"] and args.num_processes == (checkpoint.num_processes or 1)

@@ -1,33 +1,82 @@
-"""lerobot-train itself, with one change: a dataset without cameras keeps each item in memory after
+"""lerobot-train itself, with one change: each item of the training dataset is kept in memory after
 its first read (`python -m so101.learn.train_in_memory` takes lerobot-train's arguments).
 
-Why: LeRobotDataset builds an item from Arrow rows each time it is asked, about 6 ms per item on
-this 2-core CPU for the state recipes' windows (2 observation steps, 16 actions), so 372 ms a batch
-of 64, against 153 ms for a whole Diffusion step (forward, backward, AdamW) of the state recipe.
-A state item is the same every epoch (image transforms and video decoding are the only random or
-costly parts, and such a dataset has no cameras), so after the first pass the loader returns the
-kept item. A dataset with cameras goes through untouched: its augmentation differs each epoch.
+Why: LeRobotDataset builds an item each time it is asked, from Arrow rows (about 6 ms per item on
+this 2-core CPU for the state recipes' windows of 2 observations and 16 actions: 372 ms a batch of
+64, against 153 ms for a whole Diffusion step of the state recipe) and, with cameras, by decoding
+each camera's video at the item's instant (about 10 ms per item for two 64x48 cameras). An item is
+the same every epoch but for its image augmentation, so the kept item is the one LeRobotDataset
+builds without its image transforms, and they are applied at each read exactly as LeRobotDataset
+applies them (each camera but depth ones, in the meta's camera order): the augmentation draws the
+same random numbers in the same order, so training gives the weights lerobot-train's own loading
+gives from the same seed and loader processes. Frames are kept as the 8-bit values they were
+decoded from: lerobot-train asks LeRobotDataset for them as uint8 (the augmentation works on those,
+and the training loop turns the batch into floats); a dataset giving floats has its frames kept as
+8-bit values too (a quarter of float32's memory) and given back as the very same floats.
+
+With cameras the kept frames must fit: a dataset whose frames, once per loader process (each keeps
+its own copies, across epochs as lerobot-train's loaders persist), would take more than half of the
+memory available at the start goes through untouched, and says so.
 Each checkpoint of a run that keeps its items says so (so101.learn.checkpoints), for --resume.
 """
 
 from __future__ import annotations
 
 import logging
+import os
+from collections.abc import Callable
 from dataclasses import dataclass
+from math import prod
 from pathlib import Path
 
+import torch
 from torch.utils.data import Dataset, IterableDataset
 
 from .checkpoints import record_items_in_memory
 
+# The share of the memory available at the start that kept frames may take.
+MEMORY_SHARE = 0.5
+
+
+@dataclass(frozen=True)
+class CompactFrames:
+    """Decoded float frames kept as their 8-bit values (`values`, uint8)."""
+
+    values: torch.Tensor
+
+
+def compact_frames(frames: torch.Tensor) -> torch.Tensor | CompactFrames:
+    """Decoded frames as float32 in [0, 1] (8-bit values over 255) as CompactFrames, when
+    expand_frames gives the very same floats back; anything else (frames LeRobot already gives as
+    uint8, as lerobot-train asks it to; depth) as it is."""
+    if frames.dtype != torch.float32:
+        return frames
+    values = (frames * 255).round_()
+    if values.min() < 0 or values.max() > 255:
+        return frames
+    compact = CompactFrames(values.to(torch.uint8))
+    return compact if expand_frames(compact).equal(frames) else frames
+
+
+def expand_frames(frames: torch.Tensor | CompactFrames) -> torch.Tensor:
+    """compact_frames' inverse: LeRobot's own conversion of decoded 8-bit frames to float32."""
+    return frames.values.type(torch.float32) / 255 if isinstance(frames, CompactFrames) else frames
+
 
 class ItemsInMemory(Dataset):
-    """A map-style dataset's items, each read once from `dataset` and then kept; every attribute
-    but the items (meta, episodes, num_frames, ...) is the wrapped dataset's."""
+    """A map-style dataset's items, each read once from `dataset` (whose image transforms, if any,
+    have been taken off and given here) and then kept; `transforms` applied at each read to
+    `transformed` (camera keys, in order). Every attribute but the items (meta, episodes,
+    num_frames, ...) is the wrapped dataset's."""
 
-    def __init__(self, dataset) -> None:
+    def __init__(
+        self, dataset, cameras: tuple[str, ...] = (), transformed: tuple[str, ...] = (), transforms: Callable | None = None
+    ) -> None:
         self.dataset = dataset
         self.items: list[dict | None] = [None] * len(dataset)
+        self.cameras = tuple(cameras)
+        self.transformed = tuple(transformed) if transforms is not None else ()
+        self.transforms = transforms
 
     def __len__(self) -> int:
         return len(self.items)
@@ -35,9 +84,15 @@ class ItemsInMemory(Dataset):
     def __getitem__(self, index: int) -> dict:
         item = self.items[index]
         if item is None:
-            item = self.items[index] = self.dataset[index]
+            item = self.dataset[index]
+            item = self.items[index] = {
+                key: compact_frames(value) if key in self.cameras else value for key, value in item.items()
+            }
         # A new dict each time: a consumer that adds or replaces keys leaves the kept item intact.
-        return dict(item)
+        item = {key: expand_frames(value) if key in self.cameras else value for key, value in item.items()}
+        for camera in self.transformed:
+            item[camera] = self.transforms(item[camera])
+        return item
 
     def __getattr__(self, name: str):
         # Only for attributes this wrapper lacks. Not `dataset` itself (an unpickled copy has none
@@ -49,8 +104,49 @@ class ItemsInMemory(Dataset):
 
 
 def keeps_items(dataset) -> bool:
-    """Whether `dataset`'s items are the same at every read: a map-style dataset without cameras."""
-    return not isinstance(dataset, IterableDataset) and not dataset.meta.camera_keys
+    """Whether `dataset`'s items can be kept: a map-style dataset (a streaming one is read once)."""
+    return not isinstance(dataset, IterableDataset)
+
+
+def frame_bytes(dataset) -> int:
+    """The bytes one item's camera frames take once kept (8 bits a value, each observation step
+    of a camera the item holds)."""
+    steps = getattr(dataset, "delta_timestamps", None) or {}
+    return sum(prod(dataset.meta.features[camera]["shape"]) * len(steps.get(camera, [0])) for camera in dataset.meta.camera_keys)
+
+
+def memory_available() -> int | None:
+    """The memory the system has available now (Linux's MemAvailable), in bytes; None if unknown."""
+    try:
+        for line in Path("/proc/meminfo").read_text().splitlines():
+            if line.startswith("MemAvailable:"):
+                return int(line.split()[1]) * 1024
+    except OSError:
+        pass
+    return None
+
+
+def size(count: int) -> str:
+    """A number of bytes in GiB, or in MiB below one GiB."""
+    return f"{count / 2**30:.1f} GiB" if count >= 2**30 else f"{count / 2**20:.1f} MiB"
+
+
+def frames_fit(dataset, copies: int, available: int | None) -> tuple[bool, str]:
+    """Whether the dataset's kept frames, `copies` times over, fit in MEMORY_SHARE of `available`;
+    and the figures that say so."""
+    needed = frame_bytes(dataset) * len(dataset) * copies
+    if needed == 0:
+        return True, "no frames"
+    if available is None:
+        return False, f"{size(needed)} of frames, and the memory available is unknown"
+    figures = f"{size(needed)} of frames ({copies} cop{'y' if copies == 1 else 'ies'}) of {size(available)} available"
+    return needed <= MEMORY_SHARE * available, figures
+
+
+def loader_copies(cfg) -> int:
+    """How many copies of the kept items a run holds: one per loader process (or the training
+    process itself), in each training process accelerate launched."""
+    return max(1, int(getattr(cfg, "num_workers", 0) or 0)) * max(1, int(os.environ.get("WORLD_SIZE", "1")))
 
 
 @dataclass
@@ -60,18 +156,44 @@ class KeptItems:
     count: int | None = None
 
 
-def with_items_in_memory(make_datasets, kept: KeptItems):
-    """lerobot-train's dataset factory, its training dataset wrapped in ItemsInMemory when its
-    items are the same at every read (noted in `kept`)."""
+def in_memory(dataset, copies: int, available: int | None) -> Dataset:
+    """`dataset` wrapped in ItemsInMemory when it can be (its image transforms moved to the wrapper),
+    or `dataset` itself when it cannot, logging which and why."""
+    if not keeps_items(dataset):
+        return dataset
+    cameras = tuple(dataset.meta.camera_keys)
+    if not cameras:
+        logging.info(
+            "so101: the dataset has no cameras: each of its %d items is kept in memory after its first read", len(dataset)
+        )
+        return ItemsInMemory(dataset)
+    fits, figures = frames_fit(dataset, copies, available)
+    if not fits:
+        logging.warning(
+            "so101: the dataset's items are read at every step, as lerobot-train does: keeping them would take %s", figures
+        )
+        return dataset
+    transforms = dataset.image_transforms
+    depth = set(getattr(dataset.meta, "depth_keys", ()) or ())
+    dataset.clear_image_transforms()
+    logging.info(
+        "so101: each of the dataset's %d items is kept in memory after its first read (%s), its image augmentation "
+        "applied at every read",
+        len(dataset),
+        figures,
+    )
+    return ItemsInMemory(dataset, cameras, tuple(camera for camera in cameras if camera not in depth), transforms)
+
+
+def with_items_in_memory(make_datasets, kept: KeptItems, available: Callable[[], int | None] = memory_available):
+    """lerobot-train's dataset factory, its training dataset kept in memory when it can be
+    (noted in `kept`)."""
 
     def make(cfg):
         dataset, eval_dataset = make_datasets(cfg)
-        if keeps_items(dataset):
-            logging.info(
-                "so101: the dataset has no cameras: each of its %d items is kept in memory after its first read", len(dataset)
-            )
+        dataset = in_memory(dataset, loader_copies(cfg), available())
+        if isinstance(dataset, ItemsInMemory):
             kept.count = len(dataset)
-            dataset = ItemsInMemory(dataset)
         return dataset, eval_dataset
 
     return make
