@@ -10,6 +10,7 @@ import contextlib
 import math
 import os
 import shlex
+import shutil
 import signal
 import subprocess
 import sys
@@ -682,9 +683,11 @@ def so101_learn(*argv: str, timeout: float) -> subprocess.CompletedProcess:
 
 
 def run_or_dump_stacks(argv: list, timeout: float, env: dict[str, str]) -> subprocess.CompletedProcess:
-    """A command, its output captured. When it runs over `timeout`, every Python process of it prints
-    its threads' stacks (faulthandler, on SIGABRT) and the test fails with them: a hang on a CI
-    machine says where it hung (a 2-process training once hung after "Creating dataset")."""
+    """A command, its output captured. When it runs over `timeout`, every process of it gives its
+    threads' native stacks (gdb, where installed) and every Python one its Python stacks
+    (faulthandler, on SIGABRT), and the test fails with them: a hang on a CI machine says where it
+    hung (a 2-process training once hung after "Creating dataset", once after its last step, in
+    native code after train() returned)."""
     argv = [str(a) for a in argv]
     process = subprocess.Popen(
         argv, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env={**env, "PYTHONFAULTHANDLER": "1"}
@@ -692,9 +695,11 @@ def run_or_dump_stacks(argv: list, timeout: float, env: dict[str, str]) -> subpr
     try:
         stdout, stderr = process.communicate(timeout=timeout)
     except subprocess.TimeoutExpired:
+        native = "\n".join(native_stacks(pid) for pid in [process.pid, *descendants(process.pid)])
         for pid in [*reversed(descendants(process.pid)), process.pid]:  # the workers first
             with contextlib.suppress(ProcessLookupError):
                 os.kill(pid, signal.SIGABRT)
+                wait_until_ended(pid, 5.0)  # one dump at a time: they share the pipe
         try:
             stdout, stderr = process.communicate(timeout=30)
         except subprocess.TimeoutExpired:
@@ -702,8 +707,46 @@ def run_or_dump_stacks(argv: list, timeout: float, env: dict[str, str]) -> subpr
                 with contextlib.suppress(ProcessLookupError):
                     os.kill(pid, signal.SIGKILL)
             stdout, stderr = process.communicate()
-        pytest.fail(f"{shlex.join(argv)[:300]} ran over {timeout} s; its processes' stacks:\n{stderr[-15000:]}\n{stdout[-3000:]}")
+        pytest.fail(
+            f"{shlex.join(argv)[:300]} ran over {timeout} s; its processes' native stacks:\n{native[-15000:]}\n"
+            f"their Python stacks:\n{stderr[-15000:]}\n{stdout[-3000:]}"
+        )
     return subprocess.CompletedProcess(argv, process.returncode, stdout, stderr)
+
+
+def wait_until_ended(pid: int, seconds: float) -> None:
+    """Until `pid` has ended (gone, or a zombie), at most `seconds`."""
+    deadline = time.monotonic() + seconds
+    while time.monotonic() < deadline:
+        try:
+            state = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0]
+        except (OSError, IndexError):
+            return
+        if state in ("Z", "X"):
+            return
+        time.sleep(0.02)
+
+
+def native_stacks(pid: int) -> str:
+    """The native stacks of `pid`'s threads (gdb attached for a moment, its 12 innermost frames per
+    thread), or why there are none."""
+    try:
+        command = (Path(f"/proc/{pid}/cmdline").read_bytes().replace(b"\0", b" ").decode(errors="replace"))[:200]
+    except OSError:
+        return f"process {pid}: gone"
+    if shutil.which("gdb") is None:
+        return f"process {pid} ({command}): no gdb for its native stacks"
+    try:
+        done = subprocess.run(
+            ["gdb", "-p", str(pid), "-batch", "-nx", "-ex", "thread apply all bt 12"],
+            capture_output=True,
+            text=True,
+            timeout=60,
+        )
+    except subprocess.TimeoutExpired:
+        return f"process {pid} ({command}): gdb took over 60 s"
+    frames = [line for line in done.stdout.splitlines() if line.startswith(("Thread ", "#"))]
+    return f"process {pid} ({command}):\n" + "\n".join(frames)
 
 
 def descendants(pid: int) -> list[int]:

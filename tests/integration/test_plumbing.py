@@ -145,3 +145,23 @@ def test_a_probe_blind_to_a_publisher_starts_over_on_a_fresh_participant(sim_fac
         assert probe.rediscoveries == 1
     finally:
         probe.close()
+
+
+def test_a_hung_command_fails_with_its_native_and_python_stacks():
+    """The harness's guard on long commands (trainings): a command past its timeout fails the test
+    with where each of its processes was, natively (gdb) and in Python (faulthandler)."""
+    import sys
+
+    from harness import run_or_dump_stacks
+
+    # The parent sleeps on after its child: it is aborted after the child, and must still be there.
+    child = (
+        "import subprocess, sys, time; subprocess.run([sys.executable, '-c', 'import time; time.sleep(120)']); time.sleep(120)"
+    )
+    with pytest.raises(pytest.fail.Exception) as failure:
+        run_or_dump_stacks([sys.executable, "-c", child], timeout=3, env={})
+    report = str(failure.value)
+    assert "ran over 3 s; its processes' native stacks" in report
+    # Both processes, the sleeping one in the C library's sleep, then each one's Python stack.
+    assert report.count("time.sleep(120)") >= 1 and "#0 " in report and "sleep" in report.split("their Python stacks")[0]
+    assert report.count("Fatal Python error: Aborted") == 2 and 'File "<string>", line 1 in <module>' in report
