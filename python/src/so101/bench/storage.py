@@ -38,6 +38,7 @@ import yaml
 
 from so101 import contract
 from so101.bench import common as bench_common
+from so101.messages import stamp_seconds
 from so101.stack.launch_plan import COMPRESSED_RECORDING, DEFAULT_JPEG_QUALITY
 from so101.subcommands import Subcommand, run_alone
 
@@ -96,13 +97,9 @@ def messages(episode: Path, topics: set[str] | None = None):
                 yield channel.topic, ros
 
 
-def stamp(ros) -> float:
-    return ros.header.stamp.sec + ros.header.stamp.nanosec * 1e-9
-
-
 def robot_seconds(episode: Path) -> float:
     """The sim-time span of the episode's /joint_states plus one period."""
-    stamps = [stamp(ros) for _, ros in messages(episode, {"/" + contract.JOINT_STATES})]
+    stamps = [stamp_seconds(ros) for _, ros in messages(episode, {"/" + contract.JOINT_STATES})]
     return max(stamps) - min(stamps) + float(np.median(np.diff(stamps)))
 
 
@@ -119,11 +116,11 @@ def psnr(raw_episode: Path, compressed_episode: Path) -> dict:
     from so101.messages import rgb_image
 
     raw_topics = {"/" + contract.camera_topic(c) for c in CAMERAS}
-    raw = {(topic.split("/")[2], round(stamp(ros), 6)): ros for topic, ros in messages(raw_episode, raw_topics)}
+    raw = {(topic.split("/")[2], round(stamp_seconds(ros), 6)): ros for topic, ros in messages(raw_episode, raw_topics)}
     errors: list[float] = []
     jpeg_bytes: list[int] = []
     for topic, ros in messages(compressed_episode, {"/" + contract.camera_topic(c, contract.IMAGE_COMPRESSED) for c in CAMERAS}):
-        reference = raw.pop((topic.split("/")[2], round(stamp(ros), 6)), None)
+        reference = raw.pop((topic.split("/")[2], round(stamp_seconds(ros), 6)), None)
         if reference is None:
             continue  # a frame one recorder missed
         difference = rgb_image(ros).astype(np.float64) - rgb_image(reference)

@@ -24,7 +24,7 @@ import numpy as np
 import yaml
 
 from .. import contract
-from ..messages import cube_pose_vector, image_size, joint_positions
+from ..messages import cube_pose_vector, image_size, joint_positions, stamp_seconds
 from .commands import CommandError, obeyed_targets, targets_from_array, targets_from_joint_state
 
 log = logging.getLogger(__name__)
@@ -116,10 +116,6 @@ def episode_dirs(paths: list[Path]) -> list[Path]:
         else:
             raise BagError(f"{path}: neither an episode directory nor a directory of episodes")
     return found
-
-
-def _stamp(header) -> float:
-    return header.stamp.sec + header.stamp.nanosec * 1e-9
 
 
 # The first bytes of every MCAP file.
@@ -305,14 +301,14 @@ def _read_files(path: Path, files: list[Path], cameras: list[str] | None, report
                     first = frames[0][1]
                     raise BagError(
                         f"{path.name}: camera {camera[0]!r} changed size from {first.width}x{first.height} "
-                        f"to {width}x{height} at t={_stamp(ros.header):.3f} s"
+                        f"to {width}x{height} at t={stamp_seconds(ros):.3f} s"
                     )
-                frames.append((_stamp(ros.header), FrameRef(len(frames), width, height)))
+                frames.append((stamp_seconds(ros), FrameRef(len(frames), width, height)))
             elif topic.endswith("/" + contract.JOINT_STATES) and not topic.endswith(contract.LEADER_JOINT_STATES):
                 ros = decode(record.data)
                 positions = joint_positions(ros)
                 if positions is not None:
-                    raw_states.append((received, _stamp(ros.header), positions))
+                    raw_states.append((received, stamp_seconds(ros), positions))
             elif topic.endswith("/" + contract.JOINT_COMMANDS) or topic.endswith("/" + contract.FORWARD_POSITION_COMMANDS):
                 ros = decode(record.data)
                 # A node drains /joint_commands before the array topic in each tick.
@@ -324,14 +320,14 @@ def _read_files(path: Path, files: list[Path], cameras: list[str] | None, report
                         targets = targets_from_joint_state(list(ros.name), list(ros.position))
                 except CommandError as error:
                     targets = f"{topic}: {error}"
-                raw_commands.append((received, int(array), targets, 0.0 if array else _stamp(ros.header)))
+                raw_commands.append((received, int(array), targets, 0.0 if array else stamp_seconds(ros)))
             elif topic.endswith("/" + contract.TASK_REWARD):
                 raw_reward.append((received, float(decode(record.data).data)))
             elif topic.endswith("/" + contract.TASK_SUCCESS):
                 raw_success.append((received, bool(decode(record.data).data)))
             elif topic.endswith("/" + contract.CUBE_POSE):
                 ros = decode(record.data)
-                raw_cube.append((_stamp(ros.header), cube_pose_vector(ros.pose)))
+                raw_cube.append((stamp_seconds(ros), cube_pose_vector(ros.pose)))
     except BagError:
         raise
     except Exception as error:  # noqa: BLE001 - a damaged file is reported, not fatal

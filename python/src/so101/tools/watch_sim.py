@@ -19,6 +19,7 @@ from std_msgs.msg import Bool, Float64
 
 from so101 import contract
 from so101.contract import CAMERA_NAMES
+from so101.messages import stamp_seconds
 from so101.paths import node_environment
 from so101.stack import process
 
@@ -70,7 +71,7 @@ class Watcher(Node):
     def line(self):
         if self.joints is None:
             return "waiting for /joint_states ..."
-        stamp = self.joints.header.stamp.sec + self.joints.header.stamp.nanosec * 1e-9
+        stamp = stamp_seconds(self.joints)
         joints = " ".join(f"{SHORT_NAMES.get(n, n)}={p:+.2f}" for n, p in zip(self.joints.name, self.joints.position))
         cube = f"cube=({self.cube.x:.3f},{self.cube.y:.3f},{self.cube.z:.3f})" if self.cube else "cube=?"
         cameras = " ".join(f"{name}={self.frames[name] - self.frames_at_last_line[name]}" for name in CAMERAS)
