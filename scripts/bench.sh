@@ -14,7 +14,7 @@
 #   scripts/bench.sh sysid [--output DIR] [--joints a,b] [--json FILE]
 #   scripts/bench.sh camera_align [--poses N] [--seed N] [--boards a3,a4] [--json FILE]
 #   scripts/bench.sh backgrounds [--repeats N] [--frames N] [--json FILE]
-#   scripts/bench.sh train_step --dataset DIR [--policy act|diffusion] [--steps N] [--skip W] [--variant V] [--json FILE]   (not in `all`: it needs a dataset)
+#   scripts/bench.sh train_step --dataset DIR [--policy act|pose_act|diffusion] [--steps N] [--skip W] [--variant V] [--json FILE]   (not in `all`: it needs a dataset)
 #   scripts/bench.sh model_step --dataset DIR [--batch-size B] [--steps N] [--variant V] [--json FILE]   (not in `all`: it needs a dataset with cameras)
 set -euo pipefail
 . "$(dirname "${BASH_SOURCE[0]}")/common.sh"

@@ -116,12 +116,13 @@ if "${VENV}/bin/python" -m pip show --quiet transformers >/dev/null 2>&1; then
     # shellcheck disable=SC2046  # one argument per package name
     "${VENV}/bin/python" -m pip uninstall --quiet --yes $(sed -n 's/^\([A-Za-z0-9_.-]*\)==.*/\1/p' "${VLA_REQUIREMENTS}")
 fi
-# With it, LeRobot's plugins (python/plugins: robot type so101_ros, env type so101_sim), each a
-# distribution of its own because LeRobot finds plugins by distribution name.
+# With it, LeRobot's plugins (python/plugins: robot type so101_ros, env type so101_sim, policy type
+# pose_act), each a distribution of its own because LeRobot finds plugins by distribution name.
 "${VENV}/bin/python" -m pip install --quiet --disable-pip-version-check --no-deps --no-build-isolation \
     --editable "${REPO_ROOT}/python" \
     --editable "${REPO_ROOT}/python/plugins/lerobot_robot_so101_ros" \
-    --editable "${REPO_ROOT}/python/plugins/lerobot_env_so101_sim"
+    --editable "${REPO_ROOT}/python/plugins/lerobot_env_so101_sim" \
+    --editable "${REPO_ROOT}/python/plugins/lerobot_policy_so101_pose_act"
 
 # Every Python process of the venv gets the project's Fast DDS profile (4 MiB socket buffers, so
 # rclpy receives camera images from the Rust nodes), RMW and checkout (SO101_ROOT: where the `so101`

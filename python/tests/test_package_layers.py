@@ -18,13 +18,14 @@ SHARED = ("so101.contract", "so101.units", "so101.ee", "so101.paths", "so101.mes
 MAY_IMPORT = {
     "shared": set(),
     "dataset": {"shared"},
+    "policies": {"shared"},
     "stack": {"shared", "dataset"},
     "envs": {"shared", "stack"},
-    "evaluate": {"shared", "dataset", "stack", "envs"},
-    "lerobot": {"shared", "dataset", "stack", "envs", "evaluate"},
-    "learn": {"shared", "dataset", "stack", "envs", "evaluate", "lerobot"},
+    "evaluate": {"shared", "dataset", "stack", "envs", "policies"},
+    "lerobot": {"shared", "dataset", "stack", "envs", "evaluate", "policies"},
+    "learn": {"shared", "dataset", "stack", "envs", "evaluate", "lerobot", "policies"},
     "sysid": {"shared", "dataset", "stack", "envs", "evaluate"},
-    "bench": {"shared", "dataset", "stack", "envs", "evaluate", "lerobot", "learn", "sysid", "cameras"},
+    "bench": {"shared", "dataset", "stack", "envs", "evaluate", "lerobot", "learn", "sysid", "cameras", "policies"},
     "tools": {"shared", "stack", "envs"},
     "cameras": {"shared"},
 }

@@ -1,6 +1,6 @@
 #!/usr/bin/env python3
-"""Where a training step's time goes: the recipe (`so101-learn act|diffusion`, exactly as a user
-runs it) for a few steps per variant, read from LeRobot's own log of each window of steps:
+"""Where a training step's time goes: the recipe (`so101-learn act|pose_act|diffusion`, exactly as a
+user runs it) for a few steps per variant, read from LeRobot's own log of each window of steps:
 data_s, the wait for the batch (the loader's reading, video decoding and augmentation, then the
 preprocessor), against updt_s, the model's step (forward, backward, optimizer). The first
 window is left out (start-up; --skip leaves out more, e.g. a first pass through a dataset whose
@@ -102,7 +102,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--bin-dir", type=Path, default=None, help="the built binaries (scripts/bench.sh passes it; unused)")
     p.add_argument("--json", type=Path, default=None, help="also write the numbers here")
     p.add_argument("--dataset", type=Path, required=True, help="the LeRobot dataset the recipe trains on")
-    p.add_argument("--policy", choices=["act", "diffusion"], default="act", help="the recipe")
+    p.add_argument("--policy", choices=["act", "pose_act", "diffusion"], default="act", help="the recipe")
     p.add_argument("--steps", type=int, default=40, help="steps per variant (logged in windows of a tenth)")
     p.add_argument("--skip", type=int, default=1, help="windows left out at the start (default 1: start-up)")
     p.add_argument("--variant", action="append", choices=list(VARIANTS), help="measure only these (repeatable; default: all)")

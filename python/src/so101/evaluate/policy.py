@@ -76,6 +76,8 @@ class StackPolicy:
         from lerobot.configs import FeatureType, PreTrainedConfig
         from lerobot.policies.factory import get_policy_class, make_pre_post_processors
 
+        from ..policies import pose_act  # noqa: F401 - registers the policy type pose_act with LeRobot
+
         if units not in ("lerobot", "radians"):
             raise PolicyError(f"units {units!r}: lerobot or radians")
         self.units, self.task, self.device = units, task, pick_device(device)

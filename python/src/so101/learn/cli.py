@@ -5,6 +5,8 @@
   act        train LeRobot's ACT with lerobot-train, CPU-sized, on the state (joints + cube pose)
              or on joints + cameras (a dataset of demos --cameras ... --no-environment-state),
              then evaluate it through so101-run-policy in lockstep
+  pose_act   ACT on the joints and the cube's pose, the pose estimated from the cameras by a CNN
+             trained beside it (a dataset of demos --cameras ..., with the pose as its target)
   diffusion  the same with LeRobot's Diffusion Policy
   smolvla    fine-tune SmolVLA (lerobot/smolvla_base or local weights) on a camera dataset's tasks,
              language-conditioned on each episode's task text, then evaluate it on each task
@@ -40,7 +42,7 @@ RECIPES = {
             lerobot_train.run,
             lerobot_train.__doc__,
         )
-        for name in ("act", "diffusion")
+        for name in ("act", "pose_act", "diffusion")
     },
     **{
         name: Subcommand(vla.summary(name), functools.partial(vla.add_arguments, name=name), vla.run, vla.__doc__)

@@ -2,7 +2,9 @@
 the state (joint positions and the cube's pose, observation.environment_state) or, given a dataset
 with cameras, on joints + images (see VISION below), in settings that fit a CPU, then evaluate the
 policy through so101-run-policy in lockstep with the sim node (the stack's real interface) over
---eval seeded episodes.
+--eval seeded episodes. Recipe `pose_act`: the state ACT's settings on the joints and the cube's
+pose estimated from the cameras (so101.policies.pose_act), on a camera dataset that records the
+pose as the estimator's target; the policy itself reads the joints and the cameras only.
 
 Why these settings (LeRobot's defaults are sized for images on a GPU: 28 s a step on 2 cores):
 - ACT: no VAE (the scripted expert's demonstrations have one mode per situation, the VAE's reason
@@ -83,6 +85,17 @@ PRESETS: dict[str, dict] = {
         "steps": 1500,
         "batch_size": 64,
     },
+    # pose_act (so101.policies.pose_act): the state ACT above, acting on the cube's pose that a
+    # small CNN estimates from the cameras, both trained in one run on a camera dataset that also
+    # records the pose (demos --cameras ... without --no-environment-state) as the estimator's
+    # target; VISION_LENGTH gives its length.
+    "pose_act": {
+        "normalization": NORMALIZE_ALL,
+        "policy": {},  # filled from "act" below
+        "training": {},
+        "steps": 1500,
+        "batch_size": 64,
+    },
     "diffusion": {
         "normalization": NORMALIZE_DIFFUSION,
         "policy": {
@@ -98,6 +111,10 @@ PRESETS: dict[str, dict] = {
         "batch_size": 64,
     },
 }
+
+
+PRESETS["pose_act"]["policy"] = dict(PRESETS["act"]["policy"])
+PRESETS["pose_act"]["training"] = dict(PRESETS["act"]["training"])
 
 
 # VISION: a dataset with cameras (observation.images.*) adds to the preset:
@@ -123,7 +140,7 @@ def augment_sets(text: str) -> tuple[str, ...]:
 # ACT with cameras: its length on this CPU (1.2 steps/s, about 55 minutes). Success on tuning
 # seeds was 20 / 23 / 93 % at 1,000 / 2,000 / 3,000 steps: the grasp comes with the learning
 # rate's annealing, as for the state (docs/benchmarks.md).
-VISION_LENGTH = {"act": {"steps": 4000, "batch_size": 32}}
+VISION_LENGTH = {"act": {"steps": 4000, "batch_size": 32}, "pose_act": {"steps": 3000, "batch_size": 64}}
 
 
 def resolve_length(args) -> None:
@@ -146,8 +163,28 @@ def dataset_cameras(dataset: Path) -> list[str]:
     return [key for key, feature in features.items() if feature.get("dtype") in ("video", "image")]
 
 
+def dataset_problem(policy_type: str, dataset: Path) -> str | None:
+    """Why the recipe cannot train on `dataset`, or None: pose_act learns the cube's pose from the
+    cameras, so its dataset needs both."""
+    if policy_type != "pose_act":
+        return None
+    features = json.loads((dataset / "meta" / "info.json").read_text())["features"]
+    if not dataset_cameras(dataset) or "observation.environment_state" not in features:
+        return (
+            f"{dataset} lacks cameras or the cube's pose: pose_act learns the pose from the cameras, so record the "
+            "demos with --cameras and without --no-environment-state (e.g. so101-learn demos --lite --cameras "
+            "top:96x72,front:96x72,wrist:96x72 --randomize)"
+        )
+    return None
+
+
 def summary(name: str) -> str:
     """The recipe's line in so101-learn --help."""
+    if name == "pose_act":
+        return (
+            "train ACT on the joints and the cube's pose estimated from the cameras (a camera dataset that records the "
+            "pose), then evaluate it"
+        )
     policy = "ACT" if name == "act" else "Diffusion Policy"
     return f"train LeRobot's {policy} on the state with lerobot-train (CPU-sized), then evaluate it"
 
@@ -487,6 +524,8 @@ def run(args) -> int:
             raise SystemExit(f"{name}: --dataset is required (or --resume OUTPUT to continue a run)")
         if not (Path(args.dataset) / "meta" / "info.json").is_file():
             raise SystemExit(f"{name}: {args.dataset} is not a LeRobot dataset (no meta/info.json)")
+        if problem := dataset_problem(args.policy_type, Path(args.dataset)):
+            raise SystemExit(f"{name}: {problem}")
         resolve_length(args)
         output = Path(args.output or repo_root() / "outputs" / f"{args.policy_type}-{time.strftime('%Y%m%d-%H%M%S')}").resolve()
         if output.exists():
