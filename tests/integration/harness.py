@@ -7,6 +7,7 @@ so101_sim_node process wrapper, and an rclpy probe node spinning in a background
 from __future__ import annotations
 
 import contextlib
+import json
 import math
 import os
 import shlex
@@ -680,6 +681,29 @@ def so101_learn(*argv: str, timeout: float) -> subprocess.CompletedProcess:
     done = run_or_dump_stacks([Path(sys.executable).parent / "so101-learn", *argv], timeout, env)
     assert done.returncode == 0, done.stdout[-3000:] + done.stderr[-3000:]
     return done
+
+
+def lerobot_eval_two_small_cameras(checkpoint: Path, output: Path) -> dict:
+    """LeRobot's own lerobot-eval of the policy in `checkpoint`, one 8-step episode on the env type
+    so101_sim with the camera tests' top and wrist cameras at 32x24 and no cube pose, offline; the
+    test fails with its output when it does. Its eval_info.json's "overall"."""
+    command = [
+        str(Path(sys.executable).parent / "lerobot-eval"),
+        f"--policy.path={checkpoint}",
+        "--policy.device=cpu",
+        "--env.type=so101_sim",
+        "--env.cameras={top: [24, 32], wrist: [24, 32]}",
+        "--env.environment_state=false",
+        "--env.episode_length=8",
+        "--eval.n_episodes=1",
+        "--eval.batch_size=1",
+        "--eval.use_async_envs=false",
+        f"--output_dir={output}",
+    ]
+    env = {**os.environ, "HF_HUB_OFFLINE": "1", "WANDB_MODE": "disabled"}
+    done = subprocess.run(command, capture_output=True, text=True, timeout=300, env=env)
+    assert done.returncode == 0, (done.stdout + done.stderr)[-4000:]
+    return json.loads((output / "eval_info.json").read_text())["overall"]
 
 
 def run_or_dump_stacks(argv: list, timeout: float, env: dict[str, str]) -> subprocess.CompletedProcess:

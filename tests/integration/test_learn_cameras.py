@@ -7,12 +7,12 @@ test_learn.py, the state recipes, so the two files' recordings run on two worker
 from __future__ import annotations
 
 import json
-import os
 import subprocess
 import sys
 from pathlib import Path
 
 import pytest
+from harness import lerobot_eval_two_small_cameras
 from harness import so101_learn as learn
 
 VENV_BIN = Path(sys.executable).parent
@@ -62,24 +62,7 @@ def test_the_camera_recipe_trains_from_scratch_with_augmentation_and_evaluates_b
     assert frame.shape == (360, 960, 3), frame.shape
 
     # The same policy through LeRobot's own evaluation, on the env type with the same cameras.
-    evaluation = tmp_path / "lerobot_eval"
-    command = [
-        str(VENV_BIN / "lerobot-eval"),
-        f"--policy.path={checkpoint}",
-        "--policy.device=cpu",
-        "--env.type=so101_sim",
-        "--env.cameras={top: [24, 32], wrist: [24, 32]}",
-        "--env.environment_state=false",
-        "--env.episode_length=8",
-        "--eval.n_episodes=1",
-        "--eval.batch_size=1",
-        "--eval.use_async_envs=false",
-        f"--output_dir={evaluation}",
-    ]
-    env = {**os.environ, "HF_HUB_OFFLINE": "1", "WANDB_MODE": "disabled"}
-    done = subprocess.run(command, capture_output=True, text=True, timeout=300, env=env)
-    assert done.returncode == 0, (done.stdout + done.stderr)[-4000:]
-    overall = json.loads((evaluation / "eval_info.json").read_text())["overall"]
+    overall = lerobot_eval_two_small_cameras(checkpoint, tmp_path / "lerobot_eval")
     assert overall["n_episodes"] == 1 and overall["pc_success"] == 0.0  # 8 steps cannot reach the bin
 
 
