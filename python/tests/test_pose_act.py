@@ -165,3 +165,24 @@ def test_lerobots_plugin_discovery_registers_the_type_in_a_fresh_process():
     done = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True, timeout=120)
     assert done.returncode == 0, done.stderr
     assert done.stdout.split() == ["False", "True"]
+
+
+def test_the_estimator_reads_the_joints_beside_the_cameras():
+    observation = batch(2)
+    moved = dict(observation)
+    moved[OBS_STATE] = observation[OBS_STATE] + 1.0  # the same pictures, the arm elsewhere
+    for reads, differs in ((True, True), (False, False)):
+        torch.manual_seed(0)
+        policy = get_policy_class("pose_act")(small_config(estimator_reads_joints=reads), dataset_stats=stats())
+        policy.eval()
+        with torch.no_grad():
+            relative = [policy._estimate(data) for data in (observation, moved)]
+        assert (not torch.allclose(*relative)) is differs
+
+
+def test_an_estimator_that_reads_joints_refuses_pictures_alone():
+    from so101.policies.pose_act.estimator import CubePoseEstimator
+
+    estimator = CubePoseEstimator([FRAME], pose_dim=7, channels=8, keypoints=4, hidden=16, joints=6)
+    with pytest.raises(ValueError, match="6 joints"):
+        estimator([torch.rand(1, *FRAME)])

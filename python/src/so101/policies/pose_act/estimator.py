@@ -34,22 +34,33 @@ def camera_trunk(channels: int) -> nn.Sequential:
 
 
 class CubePoseEstimator(nn.Module):
-    """Frames (B x 3 x H x W each, in the cameras' order) -> the pose (B x pose_dim, normalized)."""
+    """Frames (B x 3 x H x W each, in the cameras' order) and, when `joints` > 0, the normalized
+    joints (B x joints) -> the pose (B x pose_dim, normalized).
 
-    def __init__(self, image_shapes: list[tuple[int, int, int]], pose_dim: int, channels: int, keypoints: int, hidden: int):
+    The joints tell the head where the wrist camera looks from: its keypoints place the cube in the
+    gripper's frame, the target is in the base frame, and the rotation between the two is the arm's."""
+
+    def __init__(
+        self, image_shapes: list[tuple[int, int, int]], pose_dim: int, channels: int, keypoints: int, hidden: int, joints: int = 0
+    ):
         super().__init__()
+        self.joints = joints
         self.trunks = nn.ModuleList(camera_trunk(channels) for _ in image_shapes)
         self.keypoints = nn.ModuleList(
             SpatialSoftmax((channels, -(-h // 4), -(-w // 4)), num_kp=keypoints) for _, h, w in image_shapes
         )
         self.head = nn.Sequential(
-            nn.Linear(2 * keypoints * len(image_shapes), hidden),
+            nn.Linear(2 * keypoints * len(image_shapes) + joints, hidden),
             nn.ReLU(inplace=True),
             nn.Linear(hidden, hidden),
             nn.ReLU(inplace=True),
             nn.Linear(hidden, pose_dim),
         )
 
-    def forward(self, images: list[Tensor]) -> Tensor:
+    def forward(self, images: list[Tensor], joints: Tensor | None = None) -> Tensor:
         points = [kp(trunk(image)).flatten(1) for image, trunk, kp in zip(images, self.trunks, self.keypoints, strict=True)]
+        if self.joints:
+            if joints is None or joints.shape[-1] != self.joints:
+                raise ValueError(f"the estimator reads {self.joints} joints beside the cameras")
+            points.append(joints)
         return self.head(torch.cat(points, dim=1))

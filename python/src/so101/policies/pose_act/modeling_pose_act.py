@@ -29,7 +29,12 @@ class PoseACTPolicy(PreTrainedPolicy):
         self.act = ACTPolicy(config.act_config())
         shapes = [tuple(config.input_features[key].shape) for key in config.image_features]
         self.estimator = CubePoseEstimator(
-            shapes, config.pose_dim, config.estimator_channels, config.estimator_keypoints, config.estimator_hidden
+            shapes,
+            config.pose_dim,
+            config.estimator_channels,
+            config.estimator_keypoints,
+            config.estimator_hidden,
+            joints=config.input_features[OBS_STATE].shape[0] if config.estimator_reads_joints else 0,
         )
         # The pose's normalization (the dataset's mean and std), saved with the weights.
         self.register_buffer("pose_mean", torch.zeros(config.pose_dim))
@@ -87,7 +92,10 @@ class PoseACTPolicy(PreTrainedPolicy):
 
     def estimated_pose(self, batch: dict[str, Tensor]) -> Tensor:
         """The cube's pose the cameras show, in the recorded pose's units (m, quaternion)."""
-        return self.pose_from_estimate(self.estimator(self._images(batch)), self.gripper_position(batch[OBS_STATE]))
+        return self.pose_from_estimate(self._estimate(batch), self.gripper_position(batch[OBS_STATE]))
+
+    def _estimate(self, batch: dict[str, Tensor]) -> Tensor:
+        return self.estimator(self._images(batch), batch[OBS_STATE])
 
     def _act_batch(self, batch: dict[str, Tensor], pose: Tensor) -> dict[str, Tensor]:
         act_batch = {OBS_STATE: batch[OBS_STATE], OBS_ENV_STATE: pose}
@@ -115,10 +123,12 @@ class PoseACTPolicy(PreTrainedPolicy):
         recorded = batch[OBS_ENV_STATE]
         gripper = self.gripper_position(batch[OBS_STATE])
         target = self.estimator_target(recorded, gripper)
-        estimate = self.estimator(self._images(batch))
+        estimate = self._estimate(batch)
         # Huber: squared within a standard deviation, linear beyond, so the frames whose pose no
         # picture can tell (a cube tumbling in the bin, its quaternion's sign) do not swamp the rest.
-        pose_loss = F.smooth_l1_loss(estimate, target)
+        pose_loss = F.smooth_l1_loss(estimate[:, :3], target[:, :3])
+        if target.shape[1] > 3:
+            pose_loss = pose_loss + self.config.orientation_loss_weight * F.smooth_l1_loss(estimate[:, 3:], target[:, 3:])
         truth = self.normalized(recorded)
         pose = truth + self.config.pose_input_noise * torch.randn_like(truth)
         if self.training and int(self.trained_steps) >= self.config.estimator_warmup_steps:
