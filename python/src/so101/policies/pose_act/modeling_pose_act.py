@@ -124,8 +124,9 @@ class PoseACTPolicy(PreTrainedPolicy):
         gripper = self.gripper_position(batch[OBS_STATE])
         target = self.estimator_target(recorded, gripper)
         estimate = self._estimate(batch)
-        # Huber: squared within a standard deviation, linear beyond, so the frames whose pose no
-        # picture can tell (a cube tumbling in the bin, its quaternion's sign) do not swamp the rest.
+        # Huber: squared within one unit (relative_scale of position, a standard deviation of
+        # orientation), linear beyond, so the frames whose pose no picture can tell (a cube
+        # tumbling in the bin, its quaternion's sign) do not swamp the rest.
         pose_loss = F.smooth_l1_loss(estimate[:, :3], target[:, :3])
         if target.shape[1] > 3:
             pose_loss = pose_loss + self.config.orientation_loss_weight * F.smooth_l1_loss(estimate[:, 3:], target[:, 3:])
