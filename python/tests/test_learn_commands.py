@@ -371,3 +371,11 @@ def test_resume_refuses_what_it_cannot_continue(tmp_path):
         lerobot_train.resume_settings(parse("act", "--resume", str(output)))
     with pytest.raises(SystemExit, match="--dataset is required"):
         lerobot_train.run(parse("act"))
+
+
+def test_demos_push_the_arm_in_process_only_and_by_a_finite_amount(tmp_path):
+    for extra, message in (([], "in-process only"), (["--backend", "inprocess", "--perturb", "nan"], "finite")):
+        perturb = [] if "--perturb" in extra else ["--perturb", "0.05"]
+        args = parse("demos", *perturb, *extra, "--output", str(tmp_path))
+        with pytest.raises(SystemExit, match=message):
+            demos.run(args)

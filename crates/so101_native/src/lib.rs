@@ -25,6 +25,8 @@ fn so101_native(module: &Bound<'_, PyModule>) -> PyResult<()> {
         so101_core::expert::SUCCESS_SHOWN_SECONDS,
     )?;
     module.add("EXPERT_JUDGE_SECONDS", so101_core::expert::JUDGE_SECONDS)?;
+    module.add("EXPERT_GRIPPER_OPEN", so101_core::expert::GRIPPER_OPEN)?;
+    module.add("EXPERT_GRIPPER_CLOSED", so101_core::expert::GRIPPER_CLOSED)?;
     module.add_function(wrap_pyfunction!(mujoco_version, module)?)?;
     module.add_function(wrap_pyfunction!(ee::ee_poses, module)?)?;
     module.add_function(wrap_pyfunction!(ee::ee_joint_targets, module)?)?;

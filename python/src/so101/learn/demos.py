@@ -14,11 +14,13 @@ to convert.
 
 --backend inprocess records the same demonstrations without ROS, straight into the dataset,
 --workers N processes in parallel (so101.learn.demos_inprocess); the stack's path stays the default.
+In-process only, --perturb SIGMA pushes the arm off the expert's path (so101.learn.perturbation).
 """
 
 from __future__ import annotations
 
 import argparse
+import math
 import re
 import shlex
 import subprocess
@@ -47,6 +49,14 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--seed", type=int, default=0, help="seed of the sim's cube placements and the expert's noise")
     p.add_argument("--waypoint-noise", type=float, default=0.005, help="expert: noise on each waypoint's position (m)")
     p.add_argument("--action-noise", type=float, default=0.01, help="expert: noise on every joint target (rad)")
+    p.add_argument(
+        "--perturb",
+        type=float,
+        default=0.0,
+        metavar="SIGMA",
+        help="--backend inprocess: push the arm off the expert's path by smooth joint offsets of SIGMA rad while the "
+        "jaws are open, recording the expert's own targets (DART: states beside the expert's, and the way back)",
+    )
     p.add_argument(
         "--cameras",
         default="none",
@@ -119,6 +129,10 @@ def convert_command(args, output: Path) -> list[str]:
 def run(args) -> int:
     if args.episodes <= 0:
         raise SystemExit("so101-learn demos: --episodes must be positive")
+    if not (math.isfinite(args.perturb) and args.perturb >= 0):
+        raise SystemExit(f"so101-learn demos: --perturb {args.perturb}: a finite amplitude >= 0 (rad)")
+    if args.perturb > 0 and args.backend != "inprocess":
+        raise SystemExit("so101-learn demos: --perturb pushes the arm in-process only (--backend inprocess)")
     if args.workers <= 0 or (args.workers > 1 and args.backend != "inprocess"):
         raise SystemExit("so101-learn demos: --workers N (N >= 1) records in parallel with --backend inprocess only")
     output = Path(args.output or repo_root() / "runs" / f"demos-{time.strftime('%Y%m%d-%H%M%S')}")
@@ -171,6 +185,7 @@ def run_inprocess(args, output: Path) -> int:
         lite=args.lite,
         environment_state=not args.no_environment_state,
         keep_failures=args.keep_failures,
+        perturb=args.perturb,
         servo_params=args.servo_params,
         randomize=args.randomize,
         camera_poses=args.camera_poses,

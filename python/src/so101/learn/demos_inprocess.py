@@ -8,7 +8,9 @@ bags that so101-bag-to-lerobot converts): the same features, units, fps, task te
 placements and randomization draws), each played as teleop_node plays it: the plan from the
 settled cube, the targets each period, the verdict once the task succeeds (the episode goes on
 SUCCESS_SHOWN seconds) or JUDGE seconds after the plan ends. The expert's noise differs: the
-stack's draws follow ROS's timing, these are seeded per episode (the same for any N).
+stack's draws follow ROS's timing, these are seeded per episode (the same for any N). One option
+is this door's alone: --perturb pushes the arm off the expert's path while the dataset keeps the
+expert's own targets (so101.learn.perturbation).
 
 Each worker writes the dataset of its contiguous share of the episodes; LeRobot's
 aggregate_datasets joins them in episode order, and so101-dataset-check checks the result.
@@ -28,6 +30,7 @@ from ..dataset.convert import EE_STATE, MIN_VIDEO_WIDTH, ROBOT_TYPE, features_fo
 from ..dataset.ee_columns import ee_columns
 from ..evaluate.parallel import run_shares, split
 from ..units import lerobot_from_radians
+from .perturbation import Perturbation
 
 
 def camera_sizes(text: str) -> dict[str, tuple[int, int]]:
@@ -71,6 +74,7 @@ class Options:
     repo_id: str
     task: str = "cube_to_bin"
     action_space: str = "joint"  # "ee": end-effector actions and state (so101.dataset.ee_columns)
+    perturb: float = 0.0  # rad: so101.learn.perturbation's sigma (0: the expert's own path)
 
 
 @dataclass
@@ -96,9 +100,13 @@ def expert_seed(seed: int, episode: int) -> int:
     return seed * 1_000_003 + episode + 1
 
 
-def play_episode(env, expert, observation: dict, reward: float, success: bool, limit: int) -> tuple[dict, bool]:
+def play_episode(
+    env, expert, observation: dict, reward: float, success: bool, limit: int, perturbation: Perturbation | None = None
+) -> tuple[dict, bool]:
     """Runs one episode as teleop_node's expert source does, from its first observation. Returns
-    its frames (radians; per frame the observation and the target commanded then) and the verdict."""
+    its frames (radians; per frame the observation and the expert's target then) and the verdict.
+    With a `perturbation`, the env is sent the expert's target pushed by it, and the frames keep
+    the expert's."""
     import so101_native
 
     period = 1.0 / contract.CONTROL_RATE
@@ -125,7 +133,7 @@ def play_episode(env, expert, observation: dict, reward: float, success: bool, l
                 return frames, True
             if succeeded_at is None and now > judged_from + so101_native.EXPERT_JUDGE_SECONDS:
                 return frames, False
-        observation, reward, _, _, info = env.step(action)
+        observation, reward, _, _, info = env.step(action if perturbation is None else perturbation(action))
         success = bool(info["is_success"])
     return frames, False
 
@@ -173,7 +181,8 @@ def record_share(options: Options, first: int, count: int, root: str, workers: i
         except ValueError as error:  # out of reach: teleop_node counts it, records nothing
             recorded.append(Recorded(episode, False, 0, False, str(error), settings))
             continue
-        frames, success = play_episode(env, expert, observation, 0.0, bool(info["is_success"]), limit)
+        perturbation = Perturbation(options.perturb, seed=(options.seed, episode)) if options.perturb > 0 else None
+        frames, success = play_episode(env, expert, observation, 0.0, bool(info["is_success"]), limit, perturbation)
         kept = success or options.keep_failures
         if kept:
             if dataset is None:
