@@ -20,7 +20,6 @@ In-process only, --perturb SIGMA pushes the arm off the expert's path (so101.lea
 from __future__ import annotations
 
 import argparse
-import math
 import re
 import shlex
 import subprocess
@@ -31,6 +30,7 @@ from pathlib import Path
 from .. import contract, sim_options
 from ..paths import repo_root
 from ..stack.launch_plan import LOCKSTEP, speed_value
+from .perturbation import check_sigma
 
 REPO_ID = "local/so101_demos"
 
@@ -129,8 +129,10 @@ def convert_command(args, output: Path) -> list[str]:
 def run(args) -> int:
     if args.episodes <= 0:
         raise SystemExit("so101-learn demos: --episodes must be positive")
-    if not (math.isfinite(args.perturb) and args.perturb >= 0):
-        raise SystemExit(f"so101-learn demos: --perturb {args.perturb}: a finite amplitude >= 0 (rad)")
+    try:
+        check_sigma(args.perturb)
+    except ValueError as error:
+        raise SystemExit(f"so101-learn demos: {error}") from None
     if args.perturb > 0 and args.backend != "inprocess":
         raise SystemExit("so101-learn demos: --perturb pushes the arm in-process only (--backend inprocess)")
     if args.workers <= 0 or (args.workers > 1 and args.backend != "inprocess"):

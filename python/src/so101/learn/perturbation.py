@@ -28,21 +28,31 @@ BUMP_SECONDS = 1.0
 PAUSE_SECONDS = (0.3, 1.2)
 
 
-def jaws_open(target: np.ndarray) -> bool:
-    """The expert's gripper target is nearer its open than its closed value."""
+GRIPPER = contract.JOINT_NAMES.index("gripper")
+LOW, HIGH = np.asarray(contract.JOINT_LIMITS, dtype=np.float64).T
+
+
+def check_sigma(sigma: float) -> float:
+    """`sigma` if it is an amplitude a perturbation takes (finite, >= 0 rad), else ValueError."""
+    if not (np.isfinite(sigma) and sigma >= 0):
+        raise ValueError(f"--perturb {sigma}: a finite amplitude >= 0 (rad)")
+    return sigma
+
+
+def jaws_open_above() -> float:
+    """The gripper target above which the expert's jaws count as open: nearer its open value than
+    its closed one."""
     import so101_native
 
-    middle = 0.5 * (so101_native.EXPERT_GRIPPER_OPEN + so101_native.EXPERT_GRIPPER_CLOSED)
-    return float(target[contract.JOINT_NAMES.index("gripper")]) > middle
+    return 0.5 * (so101_native.EXPERT_GRIPPER_OPEN + so101_native.EXPERT_GRIPPER_CLOSED)
 
 
 class Perturbation:
     """The offset added to the expert's targets, one control period at a time (rad)."""
 
     def __init__(self, sigma: float, seed: int | tuple[int, ...], control_rate: float = contract.CONTROL_RATE):
-        if sigma < 0 or not np.isfinite(sigma):
-            raise ValueError(f"perturbation sigma {sigma!r}: a finite amplitude >= 0 (rad)")
-        self.sigma = sigma
+        self.sigma = check_sigma(sigma)
+        self._jaws_open_above = jaws_open_above()
         self._rng = np.random.default_rng(seed)
         self._period = 1.0 / control_rate
         self._bump_steps = max(1, round(BUMP_SECONDS * control_rate))
@@ -62,7 +72,7 @@ class Perturbation:
         if self._pause > 0:
             self._pause -= 1
             return np.zeros_like(self._amplitude)
-        if self.sigma > 0 and jaws_open(target):
+        if self.sigma > 0 and target[GRIPPER] > self._jaws_open_above:
             self._amplitude = self._rng.normal(0.0, self.sigma, len(JOINT_WEIGHTS)) * np.asarray(JOINT_WEIGHTS)
             self._step = 0
             self._pause = self._draw_pause()
@@ -71,6 +81,5 @@ class Perturbation:
     def __call__(self, target: np.ndarray) -> np.ndarray:
         """The target to execute: the expert's, pushed by this period's offset, inside the joints'
         limits (float32, as the env takes it)."""
-        low, high = np.asarray(contract.JOINT_LIMITS, dtype=np.float64).T
         pushed = np.asarray(target, dtype=np.float64) + self.offset(target)
-        return np.clip(pushed, low, high).astype(np.float32)
+        return np.clip(pushed, LOW, HIGH).astype(np.float32)
