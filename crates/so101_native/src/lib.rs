@@ -27,6 +27,12 @@ fn so101_native(module: &Bound<'_, PyModule>) -> PyResult<()> {
     module.add("EXPERT_JUDGE_SECONDS", so101_core::expert::JUDGE_SECONDS)?;
     module.add("EXPERT_GRIPPER_OPEN", so101_core::expert::GRIPPER_OPEN)?;
     module.add("EXPERT_GRIPPER_CLOSED", so101_core::expert::GRIPPER_CLOSED)?;
+    // Where the sim puts the arm's base in its world (m): the cube's pose is in the world frame,
+    // the forward kinematics' in the base's.
+    module.add(
+        "SIM_BASE_IN_WORLD",
+        so101_core::kinematics::SIM_BASE_IN_WORLD.to_vec(),
+    )?;
     module.add_function(wrap_pyfunction!(mujoco_version, module)?)?;
     module.add_function(wrap_pyfunction!(ee::ee_poses, module)?)?;
     module.add_function(wrap_pyfunction!(ee::ee_joint_targets, module)?)?;

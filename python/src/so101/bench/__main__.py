@@ -17,6 +17,7 @@ from . import (
     expert,
     latency,
     model_step,
+    pose_estimate,
     recorder,
     servo_model,
     sim,
@@ -46,6 +47,7 @@ BENCHMARKS = {
         sysid,
         train_step,
         model_step,
+        pose_estimate,
     )
 }
 
