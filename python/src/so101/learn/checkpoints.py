@@ -3,7 +3,8 @@ OUTPUT/checkpoints/<step>/ with pretrained_model/ (the weights and train_config.
 training_state/ (optimizer, scheduler, RNG, training_step.json), and checkpoints/last pointing at
 the newest checkpoint once it is written whole (the names are LeRobot's, lerobot.utils.constants);
 in each checkpoint, beside LeRobot's, ours: whether the run keeps its items in memory
-(so101.learn.train_in_memory)."""
+(so101.learn.train_in_memory). Also the policy a new run starts from (--init): a checkpoint's
+pretrained_model/."""
 
 from __future__ import annotations
 
@@ -70,3 +71,14 @@ def record_items_in_memory(checkpoint_dir: Path, items: int) -> None:
     """Marks a checkpoint as one of a run keeping its items in memory (written beside its
     pretrained_model/ and training_state/, so it travels with the checkpoint)."""
     (checkpoint_dir / ITEMS_IN_MEMORY).write_text(json.dumps({"items_in_memory": True, "items": items}) + "\n")
+
+
+def init_problem(policy_type: str, checkpoint: Path) -> str | None:
+    """Why a run of `policy_type` cannot start from `checkpoint`'s weights (--init), or None."""
+    config = checkpoint / "config.json"
+    if not (config.is_file() and (checkpoint / "model.safetensors").is_file()):
+        return f"--init {checkpoint} holds no policy (config.json and model.safetensors: a checkpoint's pretrained_model)"
+    found = json.loads(config.read_text()).get("type")
+    if found != policy_type:
+        return f"--init {checkpoint} is a {found} policy, not {policy_type}"
+    return None

@@ -14,7 +14,9 @@ to convert.
 
 --backend inprocess records the same demonstrations without ROS, straight into the dataset,
 --workers N processes in parallel (so101.learn.demos_inprocess); the stack's path stays the default.
-In-process only, --perturb SIGMA pushes the arm off the expert's path (so101.learn.perturbation).
+In-process only, --perturb SIGMA pushes the arm off the expert's path (so101.learn.perturbation),
+--driver CKPT lets a trained policy send the arm while the expert's targets are recorded, and
+--after DATASET puts a dataset's episodes before the new ones (DAgger: so101.learn.dagger).
 """
 
 from __future__ import annotations
@@ -30,6 +32,7 @@ from pathlib import Path
 from .. import contract, sim_options
 from ..paths import repo_root
 from ..stack.launch_plan import LOCKSTEP, speed_value
+from .dagger import check_share
 from .perturbation import check_sigma
 
 REPO_ID = "local/so101_demos"
@@ -56,6 +59,28 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         metavar="SIGMA",
         help="--backend inprocess: push the arm off the expert's path by smooth joint offsets of SIGMA rad while the "
         "jaws are open, recording the expert's own targets (DART: states beside the expert's, and the way back)",
+    )
+    p.add_argument(
+        "--driver",
+        default=None,
+        metavar="CKPT",
+        help="--backend inprocess: a trained policy (a LeRobot checkpoint) sends the arm, the dataset records the "
+        "expert's targets from where it goes (DAgger: the states a policy's own errors lead to)",
+    )
+    p.add_argument(
+        "--driver-share",
+        type=float,
+        default=1.0,
+        metavar="A",
+        help="--driver: the arm is sent the expert's target moved A of the way to the policy's (default 1: the policy's)",
+    )
+    p.add_argument(
+        "--after",
+        type=Path,
+        default=None,
+        metavar="DATASET",
+        help="--backend inprocess: the new dataset holds this dataset's episodes, then the new ones (DAgger's "
+        "aggregate; the same cameras, pose and action space)",
     )
     p.add_argument(
         "--cameras",
@@ -133,8 +158,15 @@ def run(args) -> int:
         check_sigma(args.perturb)
     except ValueError as error:
         raise SystemExit(f"so101-learn demos: {error}") from None
-    if args.perturb > 0 and args.backend != "inprocess":
-        raise SystemExit("so101-learn demos: --perturb pushes the arm in-process only (--backend inprocess)")
+    for given, option in ((args.perturb > 0, "--perturb"), (args.driver, "--driver"), (args.after, "--after")):
+        if given and args.backend != "inprocess":
+            raise SystemExit(f"so101-learn demos: {option} works in-process only (--backend inprocess)")
+    if args.perturb > 0 and args.driver:
+        raise SystemExit("so101-learn demos: --perturb or --driver: the arm is pushed by noise or sent by a policy, not both")
+    try:
+        check_share(args.driver_share)
+    except ValueError as error:
+        raise SystemExit(f"so101-learn demos: {error}") from None
     if args.workers <= 0 or (args.workers > 1 and args.backend != "inprocess"):
         raise SystemExit("so101-learn demos: --workers N (N >= 1) records in parallel with --backend inprocess only")
     output = Path(args.output or repo_root() / "runs" / f"demos-{time.strftime('%Y%m%d-%H%M%S')}")
@@ -188,6 +220,8 @@ def run_inprocess(args, output: Path) -> int:
         environment_state=not args.no_environment_state,
         keep_failures=args.keep_failures,
         perturb=args.perturb,
+        driver=args.driver,
+        driver_share=args.driver_share,
         servo_params=args.servo_params,
         randomize=args.randomize,
         camera_poses=args.camera_poses,
@@ -195,6 +229,16 @@ def run_inprocess(args, output: Path) -> int:
         task=args.task,
         action_space=args.action_space,
     )
+    if args.after is not None and (problem := demos_inprocess.features_problem(args.after, options)):
+        raise SystemExit(f"so101-learn demos: --after {problem}")
+    if args.driver:
+        from ..evaluate.policy import PolicyError
+        from .dagger import load_driver
+
+        try:  # here first, so that a checkpoint that cannot drive is refused before the workers start
+            load_driver(args.driver, args.driver_share, cameras)
+        except PolicyError as error:
+            raise SystemExit(f"so101-learn demos: --driver: {error}") from None
     output.mkdir(parents=True, exist_ok=True)
     started = time.monotonic()
     workers = min(args.workers, args.episodes)
@@ -202,7 +246,7 @@ def run_inprocess(args, output: Path) -> int:
         f"==> recording {args.episodes} expert demonstration(s) in-process on {workers} worker(s) into {output / 'dataset'}",
         flush=True,
     )
-    results = demos_inprocess.record(options, args.episodes, workers, output / "dataset")
+    results = demos_inprocess.record(options, args.episodes, workers, output / "dataset", after=args.after)
     for result in results:
         verdict = "success" if result.success else "failure"
         kept = "" if result.kept else ", left out"
@@ -216,6 +260,7 @@ def run_inprocess(args, output: Path) -> int:
         f"\nSummary: {len(results)} demonstration(s) played, {successes} successful "
         f"({sum(r.regrasps > 0 for r in results)} after a regrasp), {len(kept)} kept "
         f"({sum(r.frames for r in kept)} frames), in {seconds:.0f} s ({60 * len(results) / max(seconds, 1e-9):.1f}/min)"
+        + (f", after the {demos_inprocess.episode_count(args.after)} episode(s) of {args.after}" if args.after else "")
     )
     if not kept:
         raise SystemExit("so101-learn demos: no episode to keep (--keep-failures keeps the failed ones)")

@@ -10,7 +10,8 @@ settled cube, the targets each period, the verdict once the task succeeds (the e
 SUCCESS_SHOWN seconds) or JUDGE seconds after the plan ends. The expert's noise differs: the
 stack's draws follow ROS's timing, these are seeded per episode (the same for any N). One option
 is this door's alone: --perturb pushes the arm off the expert's path while the dataset keeps the
-expert's own targets (so101.learn.perturbation).
+expert's own targets (so101.learn.perturbation); --driver CKPT lets a trained policy send the arm
+while the dataset keeps the expert's targets (so101.learn.dagger).
 
 Each worker writes the dataset of its contiguous share of the episodes; LeRobot's
 aggregate_datasets joins them in episode order, and so101-dataset-check checks the result.
@@ -19,14 +20,24 @@ aggregate_datasets joins them in episode order, and so101-dataset-check checks t
 from __future__ import annotations
 
 import argparse
+import json
 import shutil
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
 from .. import contract
-from ..dataset.convert import EE_STATE, MIN_VIDEO_WIDTH, ROBOT_TYPE, features_for, image_size, write_simulation_settings
+from ..dataset.convert import (
+    EE_STATE,
+    MIN_VIDEO_WIDTH,
+    ROBOT_TYPE,
+    SIMULATION_FILE,
+    features_for,
+    image_size,
+    write_simulation_settings,
+)
 from ..dataset.ee_columns import ee_columns
 from ..evaluate.parallel import run_shares, split
 from ..units import lerobot_from_radians
@@ -75,6 +86,8 @@ class Options:
     task: str = "cube_to_bin"
     action_space: str = "joint"  # "ee": end-effector actions and state (so101.dataset.ee_columns)
     perturb: float = 0.0  # rad: so101.learn.perturbation's sigma (0: the expert's own path)
+    driver: str | None = None  # a checkpoint whose policy sends the arm (so101.learn.dagger)
+    driver_share: float = 1.0  # the policy's share of the target the arm is sent
 
 
 @dataclass
@@ -101,12 +114,12 @@ def expert_seed(seed: int, episode: int) -> int:
 
 
 def play_episode(
-    env, expert, observation: dict, reward: float, success: bool, limit: int, perturbation: Perturbation | None = None
+    env, expert, observation: dict, reward: float, success: bool, limit: int, drive: Callable | None = None
 ) -> tuple[dict, bool]:
     """Runs one episode as teleop_node's expert source does, from its first observation. Returns
     its frames (radians; per frame the observation and the expert's target then) and the verdict.
-    With a `perturbation`, the env is sent the expert's target pushed by it, and the frames keep
-    the expert's."""
+    With `drive` (a Perturbation or a PolicyDriver: (the expert's target, the observation) -> the
+    target to execute), the env is sent what it answers, and the frames keep the expert's."""
     import so101_native
 
     period = 1.0 / contract.CONTROL_RATE
@@ -133,7 +146,7 @@ def play_episode(
                 return frames, True
             if succeeded_at is None and now > judged_from + so101_native.EXPERT_JUDGE_SECONDS:
                 return frames, False
-        observation, reward, _, _, info = env.step(action if perturbation is None else perturbation(action))
+        observation, reward, _, _, info = env.step(action if drive is None else drive(action, observation))
         success = bool(info["is_success"])
     return frames, False
 
@@ -160,6 +173,7 @@ def record_share(options: Options, first: int, count: int, root: str, workers: i
     )
     task_text = contract.TASKS[options.task].description
     limit = 2 * contract.TASKS[options.task].episode_steps
+    driver = policy_driver(options, workers)
     dataset = None
     recorded: list[Recorded] = []
     # The sim node's sequence: its first /sim/reset gives the seed's first placement and draw.
@@ -181,8 +195,12 @@ def record_share(options: Options, first: int, count: int, root: str, workers: i
         except ValueError as error:  # out of reach: teleop_node counts it, records nothing
             recorded.append(Recorded(episode, False, 0, False, str(error), settings))
             continue
-        perturbation = Perturbation(options.perturb, seed=(options.seed, episode)) if options.perturb > 0 else None
-        frames, success = play_episode(env, expert, observation, 0.0, bool(info["is_success"]), limit, perturbation)
+        drive = driver
+        if options.perturb > 0:
+            drive = Perturbation(options.perturb, seed=(options.seed, episode))
+        elif driver is not None:
+            driver.reset()
+        frames, success = play_episode(env, expert, observation, 0.0, bool(info["is_success"]), limit, drive)
         kept = success or options.keep_failures
         if kept:
             if dataset is None:
@@ -207,6 +225,19 @@ def record_share(options: Options, first: int, count: int, root: str, workers: i
     if dataset is not None:
         dataset.finalize()
     return recorded
+
+
+def policy_driver(options: Options, workers: int):
+    """The worker's PolicyDriver of --driver (its torch threads its share of the cores), or None."""
+    if options.driver is None:
+        return None
+    import torch
+
+    from ..evaluate.parallel import threads_per_worker
+    from .dagger import load_driver
+
+    torch.set_num_threads(threads_per_worker(workers))
+    return load_driver(options.driver, options.driver_share, options.cameras)
 
 
 def write_episode(dataset, frames: dict, success: bool, task: str, options: Options, parallel_encoding: bool) -> None:
@@ -235,10 +266,11 @@ def write_episode(dataset, frames: dict, success: bool, task: str, options: Opti
     dataset.save_episode(parallel_encoding=parallel_encoding)
 
 
-def record(options: Options, episodes: int, workers: int, output: Path) -> list[Recorded]:
+def record(options: Options, episodes: int, workers: int, output: Path, after: Path | None = None) -> list[Recorded]:
     """`episodes` demonstrations on `workers` processes into the dataset at `output` (which must
-    not exist); every episode's record, in order. Nothing is left at `output` unless all of it
-    was written."""
+    not exist), after the episodes of the dataset `after` if one is given (DAgger trains on all
+    it has gathered); every new episode's record, in order. Nothing is left at `output` unless all
+    of it was written."""
     shares = [(first, len(seeds)) for first, seeds in split(list(range(episodes)), 0, workers)]
     work = output.parent / f".{output.name}-partial"
     if work.exists():
@@ -256,19 +288,50 @@ def record(options: Options, episodes: int, workers: int, output: Path) -> list[
             joined = work / "joined"
             join(options.repo_id, roots, joined)
             kept = [r for r in results if r.kept]
-            write_simulation_settings(
-                joined,
-                [{"episode_index": index, "bag": r.label, "simulation": r.simulation} for index, r in enumerate(kept)],
-            )
+            settings = [{"episode_index": index, "bag": r.label, "simulation": r.simulation} for index, r in enumerate(kept)]
+            if after is not None:
+                settings = simulation_settings(after) + [
+                    dict(entry, episode_index=entry["episode_index"] + episode_count(after)) for entry in settings
+                ]
+                join(options.repo_id, [after, joined], work / "after", keep=True)
+                joined = work / "after"
+            write_simulation_settings(joined, settings)
             joined.rename(output)
     finally:
         shutil.rmtree(work, ignore_errors=True)
     return results
 
 
-def join(repo_id: str, roots: list[Path], output: Path) -> None:
-    """The shards as one dataset at `output`, in their order (LeRobot's own aggregation)."""
-    if len(roots) == 1:
+def episode_count(dataset: Path) -> int:
+    return int(json.loads((dataset / "meta" / "info.json").read_text())["total_episodes"])
+
+
+def simulation_settings(dataset: Path) -> list[dict]:
+    """The per-episode entries of a dataset's meta/so101_simulation.json (none if it has none)."""
+    path = dataset / SIMULATION_FILE
+    return json.loads(path.read_text())["episodes"] if path.exists() else []
+
+
+def features_problem(dataset: Path, options: Options) -> str | None:
+    """Why the dataset's episodes cannot come before the ones `options` record (--after), or None:
+    LeRobot aggregates datasets of the same features only."""
+    info = dataset / "meta" / "info.json"
+    if not info.exists():
+        return f"{dataset} is not a LeRobot dataset (no meta/info.json)"
+    theirs = json.loads(info.read_text())["features"]
+    ours = features_for(
+        options.cameras, use_videos=True, environment_state=options.environment_state, action_space=options.action_space
+    )
+    shape = {key: list(feature["shape"]) for key, feature in ours.items()}
+    if (found := {key: list(theirs[key]["shape"]) for key in theirs if key in shape or key.startswith("observation.")}) != shape:
+        return f"{dataset} has the features {found}, these demonstrations {shape} (the same --cameras, pose and action space)"
+    return None
+
+
+def join(repo_id: str, roots: list[Path], output: Path, keep: bool = False) -> None:
+    """The shards as one dataset at `output`, in their order (LeRobot's own aggregation); `keep`:
+    the roots stay as they are (one is otherwise moved to `output`)."""
+    if len(roots) == 1 and not keep:
         roots[0].rename(output)
         return
     from lerobot.datasets.aggregate import aggregate_datasets

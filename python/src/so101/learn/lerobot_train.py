@@ -44,7 +44,7 @@ from .. import contract
 from ..dataset.parquet import read_parquet
 from ..paths import repo_root
 from . import augment
-from .checkpoints import Checkpoint, CheckpointError, last_checkpoint
+from .checkpoints import Checkpoint, CheckpointError, init_problem, last_checkpoint
 from .eval_recipe import run_policy_command
 
 # ACT: every input and the actions by their mean and std (the cube's pose too: its z of ~0.77 m and a
@@ -238,6 +238,14 @@ def add_arguments(p: argparse.ArgumentParser, name: str) -> None:
         help=f"image augmentation of a dataset with cameras: a comma list of {', '.join(augment.SETS)}, or none "
         f"(default {augment.DEFAULT}; so101.learn.augment describes each)",
     )
+    p.add_argument(
+        "--init",
+        metavar="CKPT",
+        default=None,
+        help=f"start from the weights of this {name} checkpoint (.../pretrained_model) instead of from scratch: "
+        "fine-tuning on a dataset that grew (so101-learn demos --driver ... --after ...); the settings, optimizer "
+        "and learning-rate schedule are a new run's",
+    )
     p.add_argument("--policy-arg", action="append", default=[], help="one more lerobot-train argument (repeatable)")
     p.add_argument("--output", default=None, help=f"lerobot-train's output directory (default outputs/{name}-<time>/)")
     p.add_argument(
@@ -293,6 +301,8 @@ def train_command(args, output: Path) -> list[str]:
         training.update(vision_training)
     command += [f"--policy.{key}={value}" for key, value in policy.items()]
     command += [f"--{key}={value}" for key, value in training.items()]
+    if args.init:
+        command.append(f"--policy.pretrained_path={Path(args.init).resolve()}")
     return with_run_settings(command, args, output)
 
 
@@ -514,6 +524,8 @@ def resume_command(args, checkpoint: Checkpoint, output: Path) -> list[str]:
 
 def run(args) -> int:
     name = f"so101-learn {args.policy_type}"
+    if args.resume and args.init:
+        raise SystemExit(f"{name}: --resume continues a run from its own weights; --init starts a new one from others'")
     if args.resume:
         output, last = resume_settings(args)
         resumed_from = last.step
@@ -525,6 +537,8 @@ def run(args) -> int:
         if not (Path(args.dataset) / "meta" / "info.json").is_file():
             raise SystemExit(f"{name}: {args.dataset} is not a LeRobot dataset (no meta/info.json)")
         if problem := dataset_problem(args.policy_type, Path(args.dataset)):
+            raise SystemExit(f"{name}: {problem}")
+        if args.init and (problem := init_problem(args.policy_type, Path(args.init))):
             raise SystemExit(f"{name}: {problem}")
         resolve_length(args)
         output = Path(args.output or repo_root() / "outputs" / f"{args.policy_type}-{time.strftime('%Y%m%d-%H%M%S')}").resolve()
@@ -558,7 +572,7 @@ def run(args) -> int:
     if args.resume:
         trained = f"trained to step {args.steps} (batch {args.batch_size}), resumed from step {resumed_from}: {args.steps - resumed_from} steps"
     else:
-        trained = f"trained {args.steps} steps (batch {args.batch_size})"
+        trained = f"trained {args.steps} steps (batch {args.batch_size})" + (f" from {args.init}" if args.init else "")
     print(f"\nSummary: {args.policy_type} {trained} in {train_s / 60:.1f} min on {args.device}")
     print(f"  policy:  {checkpoint}")
     if result:

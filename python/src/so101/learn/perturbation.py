@@ -78,8 +78,8 @@ class Perturbation:
             self._pause = self._draw_pause()
         return np.zeros_like(self._amplitude)
 
-    def __call__(self, target: np.ndarray) -> np.ndarray:
+    def __call__(self, target: np.ndarray, observation: dict | None = None) -> np.ndarray:
         """The target to execute: the expert's, pushed by this period's offset, inside the joints'
-        limits (float32, as the env takes it)."""
+        limits (float32, as the env takes it). The observation is not read: the push is blind."""
         pushed = np.asarray(target, dtype=np.float64) + self.offset(target)
         return np.clip(pushed, LOW, HIGH).astype(np.float32)

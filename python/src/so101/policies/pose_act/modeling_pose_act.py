@@ -56,6 +56,18 @@ class PoseACTPolicy(PreTrainedPolicy):
         self.register_buffer("relative_mean", self.pose_mean[:3] - self.gripper_position(torch.zeros(1, 6))[0])
         self.reset()
 
+    @classmethod
+    def from_pretrained(cls, pretrained_name_or_path, *, dataset_stats: dict | None = None, **kwargs):
+        """The saved policy. Given a dataset's statistics (lerobot-train --policy.pretrained_path:
+        fine-tuning on another dataset), the joints' normalization follows them, as the
+        preprocessor's does, so the forward kinematics reads the joints it is given; the pose's
+        units stay the saved ones, the estimator's outputs are in them."""
+        policy = super().from_pretrained(pretrained_name_or_path, dataset_stats=dataset_stats, **kwargs)
+        if dataset_stats and OBS_STATE in dataset_stats:
+            policy.state_mean.copy_(as_vector(dataset_stats[OBS_STATE]["mean"]))
+            policy.state_std.copy_(as_vector(dataset_stats[OBS_STATE]["std"]))
+        return policy
+
     def get_optim_params(self):
         estimator = [p for p in self.estimator.parameters() if p.requires_grad]
         chosen = {id(p) for p in estimator}
