@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from recording_env import Sent
 
 from so101 import contract
 from so101.envs import So101InProcessEnv
@@ -49,17 +50,6 @@ class HoldingPolicy:
         if self.first is None:
             self.first = observation["positions"]
         return self.first
-
-
-class Sent:
-    """The env, keeping every action it was sent."""
-
-    def __init__(self, env):
-        self.env, self.actions = env, []
-
-    def step(self, action):
-        self.actions.append(np.asarray(action, dtype=np.float64))
-        return self.env.step(action)
 
 
 def test_a_driven_episode_sends_the_policys_targets_and_records_the_experts():

@@ -7,6 +7,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 import so101_native
+from recording_env import Sent
 
 from so101 import contract
 from so101.envs import So101InProcessEnv
@@ -64,17 +65,6 @@ def test_executed_targets_stay_inside_the_joint_limits():
     perturbation = Perturbation(0.5, seed=11)
     executed = np.array([perturbation(at_limit) for _ in range(300)])
     assert np.all(executed >= low.astype(np.float32)) and np.all(executed <= high.astype(np.float32))
-
-
-class Sent:
-    """The env, keeping every action it was sent."""
-
-    def __init__(self, env):
-        self.env, self.actions = env, []
-
-    def step(self, action):
-        self.actions.append(np.asarray(action, dtype=np.float64))
-        return self.env.step(action)
 
 
 def test_a_perturbed_episode_records_the_experts_targets_and_the_expert_still_succeeds():
