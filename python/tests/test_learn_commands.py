@@ -11,7 +11,7 @@ from pathlib import Path
 
 import pytest
 
-from so101.learn import cli, demos, lerobot_train
+from so101.learn import cli, dataset_facts, demos, lerobot_train
 from so101.learn.checkpoints import record_items_in_memory
 
 
@@ -141,7 +141,7 @@ def test_a_dataset_with_cameras_gets_a_backbone_from_scratch_and_colour_augmenta
     state = {"observation.state": {"dtype": "float32", "shape": [6]}, "action": {"dtype": "float32", "shape": [6]}}
     write_info(tmp_path / "state", state)
     write_info(tmp_path / "cameras", {**state, "observation.images.top": {"dtype": "video", "shape": [72, 96, 3]}})
-    assert lerobot_train.dataset_cameras(tmp_path / "cameras") == ["observation.images.top"]
+    assert dataset_facts.dataset_cameras(tmp_path / "cameras") == ["observation.images.top"]
 
     def command(dataset: str, recipe: str = "act") -> list[str]:
         return lerobot_train.train_command(parse(recipe, "--dataset", str(tmp_path / dataset)), tmp_path / "o")

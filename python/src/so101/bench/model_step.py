@@ -47,7 +47,7 @@ def setting(value):
 
 def camera_shapes(dataset: Path) -> dict[str, tuple[int, int, int]]:
     """The dataset's cameras and their (channels, height, width), from its meta/info.json."""
-    from ..learn.lerobot_train import dataset_cameras
+    from ..learn.dataset_facts import dataset_cameras
 
     cameras = dataset_cameras(dataset)
     if not cameras:

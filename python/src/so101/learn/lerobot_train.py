@@ -40,11 +40,11 @@ import sys
 import time
 from pathlib import Path
 
-from .. import contract
-from ..dataset.parquet import read_parquet
 from ..paths import repo_root
 from . import augment
+from .accelerate_launch import accelerate_command
 from .checkpoints import Checkpoint, CheckpointError, init_problem, last_checkpoint
+from .dataset_facts import dataset_cameras, dataset_task, has_cameras
 from .eval_recipe import run_policy_command
 
 # ACT: every input and the actions by their mean and std (the cube's pose too: its z of ~0.77 m and a
@@ -150,17 +150,6 @@ def resolve_length(args) -> None:
     length = {**PRESETS[args.policy_type], **vision}
     args.steps = length["steps"] if args.steps is None else args.steps
     args.batch_size = length["batch_size"] if args.batch_size is None else args.batch_size
-
-
-def has_cameras(dataset: Path) -> bool:
-    """Whether `dataset` is a LeRobot dataset with camera features (False when it is none yet)."""
-    return (dataset / "meta" / "info.json").is_file() and bool(dataset_cameras(dataset))
-
-
-def dataset_cameras(dataset: Path) -> list[str]:
-    """The dataset's camera features (observation.images.<name>), from its meta/info.json."""
-    features = json.loads((dataset / "meta" / "info.json").read_text())["features"]
-    return [key for key, feature in features.items() if feature.get("dtype") in ("video", "image")]
 
 
 def dataset_problem(policy_type: str, dataset: Path) -> str | None:
@@ -350,7 +339,7 @@ def launched(arguments: list[str], args) -> list[str]:
     after the module in each process accelerate launches for several processes."""
     module = trainer_module(args)
     if args.num_processes > 1:
-        return launcher(args, module) + arguments
+        return accelerate_command(args.num_processes, module) + arguments
     if module == LEROBOT_TRAIN:
         return [str(Path(sys.executable).with_name("lerobot-train")), *arguments]
     return [sys.executable, "-m", module, *arguments]
@@ -372,63 +361,6 @@ def loader_workers(args) -> int:
     # Several CPU processes share the cores already, and a loader forked from a process whose
     # gloo group is up can deadlock it (a 3-step run hung for 5 min in the suite).
     return 0 if args.num_processes > 1 else 1
-
-
-def free_port() -> int:
-    """A TCP port no one listens on now (the system picks it)."""
-    import socket
-
-    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as probe:
-        probe.bind(("127.0.0.1", 0))
-        return probe.getsockname()[1]
-
-
-def launcher(args, module: str) -> list[str]:
-    """accelerate launch with N processes running lerobot-train's `module`: LeRobot's multi-GPU
-    training (one process per GPU), or processes on the CPU (gloo) where no GPU is named."""
-    accelerate = str(Path(sys.executable).with_name("accelerate"))
-    return [
-        accelerate,
-        "launch",
-        f"--num_processes={args.num_processes}",
-        # torch.distributed's launcher for either: lerobot-train's Accelerator takes the CPU (gloo)
-        # itself when the policy's device is the CPU.
-        "--multi_gpu",
-        # accelerate gives each process one thread unless told: on the CPU they share the cores.
-        f"--num_cpu_threads_per_process={max(1, (os.cpu_count() or 1) // args.num_processes)}",
-        "--num_machines=1",
-        # A port of its own for the processes' rendezvous: at accelerate's fixed default, a second
-        # training on the machine would join the first one's group and both would wait forever.
-        f"--main_process_port={free_port()}",
-        "--mixed_precision=no",
-        "--dynamo_backend=no",
-        "-m",
-        module,
-    ]
-
-
-def dataset_texts(dataset: Path) -> list[str]:
-    """The task texts of the dataset's episodes (meta/tasks.parquet; none when unreadable)."""
-    try:
-        return list(read_parquet(Path(dataset) / "meta" / "tasks.parquet").index)
-    except (OSError, ValueError):
-        return []
-
-
-def dataset_tasks(dataset: Path) -> list[str]:
-    """The contract's tasks whose texts the dataset's episodes carry."""
-    texts = dataset_texts(dataset)
-    return [name for name, facts in contract.TASKS.items() if facts.description in texts]
-
-
-def dataset_task(dataset: Path) -> str:
-    """The contract's task whose text the dataset's episodes carry (the one the recipe evaluates
-    on); cube_to_bin for a dataset of several tasks or of a text no task has."""
-    texts = dataset_texts(dataset)
-    tasks = [name for name, facts in contract.TASKS.items() if [facts.description] == texts]
-    if not tasks:
-        print(f"so101-learn: the dataset's tasks {texts} are no single task of the sim: evaluating on cube_to_bin")
-    return tasks[0] if tasks else "cube_to_bin"
 
 
 def eval_command(args, checkpoint: Path, eval_dir: Path) -> list[str]:

@@ -30,8 +30,9 @@ from pathlib import Path
 from .. import contract
 from ..evaluate.policy import DATASET_FEATURES_FILE, vla_packages_missing
 from ..paths import repo_root
+from .dataset_facts import dataset_cameras, dataset_tasks
 from .eval_recipe import run_policy_command
-from .lerobot_train import dataset_cameras, dataset_tasks, with_run_settings
+from .lerobot_train import with_run_settings
 
 # What each recipe fine-tunes from by default, LeRobot's documented length for it, and how LeRobot's
 # documentation starts it: SmolVLA from the pretrained policy whole (--policy.path: its config and
