@@ -250,6 +250,20 @@ def test_demos_record_in_parallel_only_in_process(tmp_path):
         demos.run(args)
 
 
+def test_the_inprocess_summary_counts_a_regrasp_beside_the_success_it_led_to():
+    from so101.learn.demos_inprocess import Recorded
+
+    results = [
+        Recorded(0, True, 300, True, "", None, regrasps=1),
+        Recorded(1, True, 280, True, "", None),
+        Recorded(2, False, 496, True, "", None, regrasps=2),  # a driven episode that regrasped and failed
+        Recorded(3, False, 496, False, "", None),
+    ]
+    line = demos.inprocess_summary(results, 60.0, after=(144, Path("runs/pdemos/dataset")))
+    assert "4 demonstration(s) played, 2 successful (1 of them after a regrasp; 2 regrasped in all)" in line
+    assert "3 kept (1076 frames), in 60 s (4.0/min), after the 144 episode(s) of runs/pdemos/dataset" in line
+
+
 def interrupted_run(
     tmp_path: Path,
     policy_type: str = "act",

@@ -253,18 +253,27 @@ def run_inprocess(args, output: Path) -> int:
         print(
             f"{contract.EPISODE_DEFAULT_PREFIX}_{result.episode + 1:04d}: {result.frames} frames ({verdict}{kept}): {result.note}"
         )
-    seconds = time.monotonic() - started
     kept = [r for r in results if r.kept]
-    successes = sum(r.success for r in results)
-    print(
-        f"\nSummary: {len(results)} demonstration(s) played, {successes} successful "
-        f"({sum(r.regrasps > 0 for r in results)} after a regrasp), {len(kept)} kept "
-        f"({sum(r.frames for r in kept)} frames), in {seconds:.0f} s ({60 * len(results) / max(seconds, 1e-9):.1f}/min)"
-        + (f", after the {demos_inprocess.episode_count(args.after)} episode(s) of {args.after}" if args.after else "")
-    )
+    after = (demos_inprocess.episode_count(args.after), args.after) if args.after else None
+    print("\n" + inprocess_summary(results, time.monotonic() - started, after))
     if not kept:
         raise SystemExit("so101-learn demos: no episode to keep (--keep-failures keeps the failed ones)")
     if check_dataset(output / "dataset"):
         raise SystemExit(f"so101-learn demos: the dataset check found problems in {output / 'dataset'}")
     print(f"  dataset: {output / 'dataset'} (repo id {args.repo_id})\nNext: so101-learn act --dataset {output / 'dataset'}")
     return 0
+
+
+def inprocess_summary(results, seconds: float, after: tuple[int, Path] | None = None) -> str:
+    """The in-process recording's summary line. A regrasp counts beside the success it led to:
+    a driven or perturbed episode can regrasp and still fail."""
+    successes = [r for r in results if r.success]
+    kept = [r for r in results if r.kept]
+    regrasped = sum(r.regrasps > 0 for r in results)
+    return (
+        f"Summary: {len(results)} demonstration(s) played, {len(successes)} successful "
+        f"({sum(r.regrasps > 0 for r in successes)} of them after a regrasp; {regrasped} regrasped in all), "
+        f"{len(kept)} kept ({sum(r.frames for r in kept)} frames), in {seconds:.0f} s "
+        f"({60 * len(results) / max(seconds, 1e-9):.1f}/min)"
+        + (f", after the {after[0]} episode(s) of {after[1]}" if after else "")
+    )
