@@ -250,9 +250,7 @@ def run_inprocess(args, output: Path) -> int:
     for result in results:
         verdict = "success" if result.success else "failure"
         kept = "" if result.kept else ", left out"
-        print(
-            f"{contract.EPISODE_DEFAULT_PREFIX}_{result.episode + 1:04d}: {result.frames} frames ({verdict}{kept}): {result.note}"
-        )
+        print(f"{result.label}: {result.frames} frames ({verdict}{kept}): {result.note}")
     kept = [r for r in results if r.kept]
     after = (demos_inprocess.episode_count(args.after), args.after) if args.after else None
     print("\n" + inprocess_summary(results, time.monotonic() - started, after))
