@@ -67,3 +67,33 @@ def test_the_main_job_and_the_in_process_door_record_the_task(task, tmp_path):
                 assert np.hypot(cube[0] - 0.20, cube[1] - 0.18) < 0.03 and abs(cube[2] - start[2] - 0.03) < 0.003
             assert np.isfinite(last["action"].numpy()).all()
         assert succeeded >= 1, f"no {task} episode of {backend} succeeded"
+
+
+def test_the_readmes_main_job_records_another_task_with_end_effector_actions(tmp_path):
+    """scripts/record_dataset.sh --task lift-cube --action-space ee: the task the contract names is
+    scored, played and recorded (its text on the episode, the dataset named after it), and the
+    converter writes end-effector actions and state beside the joints."""
+    from lerobot.datasets.lerobot_dataset import LeRobotDataset
+
+    from so101.ee import EE_FEATURE_NAMES
+    from so101.paths import repo_root
+
+    output = tmp_path / "run"
+    done = subprocess.run(
+        [repo_root() / "scripts" / "record_dataset.sh", "--task", "lift-cube", "--action-space", "ee",
+         "--episodes", "1", "--seed", "3", "--lite", "--cameras", "top:64x48", "--output", output],
+        capture_output=True, text=True, timeout=300, env={**os.environ, "HF_HUB_OFFLINE": "1"},
+    )  # fmt: skip
+    assert done.returncode == 0, done.stdout[-3000:] + done.stderr[-3000:]
+    assert "repo id local/so101_lift_cube, ee actions" in done.stdout, done.stdout[-3000:]
+    assert "so101-learn demos --task lift_cube" in done.stdout
+    dataset = LeRobotDataset("local/so101_lift_cube", root=output / "dataset")
+    assert dataset.num_episodes == 1
+    assert list(dataset.meta.tasks.index) == [contract.TASKS["lift_cube"].description]
+    features = dataset.meta.features
+    assert features["action"]["names"] == EE_FEATURE_NAMES
+    assert features["observation.ee_state"]["names"] == EE_FEATURE_NAMES
+    assert features["observation.images.top"]["shape"] == (48, 64, 3)
+    # lift_cube's episode is 300 periods at most: the sim ran the task asked, not cube_to_bin's 600.
+    assert 0 < dataset.num_frames <= contract.TASKS["lift_cube"].episode_steps
+    assert np.isfinite(dataset[0]["action"].numpy()).all()
