@@ -48,6 +48,11 @@ def test_the_policy_is_the_recipes_and_each_lever_is_applied(tmp_path):
     assert channels_last.batch["observation.images.top"].is_contiguous(memory_format=layout)
     bf16 = model_step.prepare("bf16-autocast", shapes, batch_size=2)
     assert isinstance(bf16.autocast, torch.autocast) and bf16.autocast.fast_dtype == torch.bfloat16
+    assert not first_conv(bf16).is_contiguous(memory_format=layout)
+    both = model_step.prepare("bf16-channels-last", shapes, batch_size=2)
+    assert isinstance(both.autocast, torch.autocast) and both.autocast.fast_dtype == torch.bfloat16
+    assert first_conv(both).is_contiguous(memory_format=layout)
+    assert both.batch["observation.images.top"].is_contiguous(memory_format=layout)
     compiled = model_step.prepare("compile", shapes, batch_size=2)
     assert hasattr(compiled.forward, "_torchdynamo_orig_callable") and not hasattr(recipe.forward, "_torchdynamo_orig_callable")
 

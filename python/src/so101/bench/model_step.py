@@ -9,6 +9,8 @@ Variants:
 - channels-last: the model and images in channels_last memory format (oneDNN's preferred layout);
 - compile: torch.compile of the policy's forward (the default inductor backend);
 - bf16-autocast: the step under CPU autocast to bfloat16 (emulated without AVX512-BF16/AMX);
+- bf16-channels-last: both of the above (oneDNN's bf16 convolutions, AMX's where the CPU has it, prefer
+  channels_last);
 - small-images: every camera at two thirds of the dataset's size (96x72 -> 64x48);
 - two-cameras: the dataset's first and last camera only (top and wrist for the recipe's three).
 The last two change what the policy sees: their success is a training's question, not this one's.
@@ -33,7 +35,9 @@ from pathlib import Path
 from ..subcommands import Subcommand, run_alone
 from . import common as bench_common
 
-VARIANTS = ("recipe", "channels-last", "compile", "bf16-autocast", "small-images", "two-cameras")
+VARIANTS = ("recipe", "channels-last", "compile", "bf16-autocast", "bf16-channels-last", "small-images", "two-cameras")
+CHANNELS_LAST = ("channels-last", "bf16-channels-last")
+BF16_AUTOCAST = ("bf16-autocast", "bf16-channels-last")
 
 
 def setting(value):
@@ -132,7 +136,7 @@ def prepare(name: str, shapes: dict[str, tuple[int, int, int]], batch_size: int)
         "action_is_pad": torch.zeros(batch_size, chunk, dtype=torch.bool),
     }
     batch |= {key: torch.rand(batch_size, *shape) for key, shape in seen.items()}
-    if name == "channels-last":
+    if name in CHANNELS_LAST:
         policy = policy.to(memory_format=torch.channels_last)
         batch |= {key: batch[key].contiguous(memory_format=torch.channels_last) for key in seen}
     training = PRESETS["act"]["training"]
@@ -143,7 +147,7 @@ def prepare(name: str, shapes: dict[str, tuple[int, int, int]], batch_size: int)
         policy=policy,
         batch=batch,
         forward=torch.compile(policy.forward) if name == "compile" else policy.forward,
-        autocast=torch.autocast("cpu", dtype=torch.bfloat16) if name == "bf16-autocast" else contextlib.nullcontext(),
+        autocast=torch.autocast("cpu", dtype=torch.bfloat16) if name in BF16_AUTOCAST else contextlib.nullcontext(),
         optimizer=optimizer,
         grad_clip_norm=training["optimizer.grad_clip_norm"],
     )
