@@ -393,3 +393,23 @@ def test_demos_push_the_arm_in_process_only_and_by_a_finite_amount(tmp_path):
         args = parse("demos", *perturb, *extra, "--output", str(tmp_path))
         with pytest.raises(SystemExit, match=message):
             demos.run(args)
+
+
+def test_bf16_is_lerobots_mixed_precision_kept_on_resume_and_warned_of_where_emulated(tmp_path):
+    dataset = tmp_path / "my_demos"
+    plain = lerobot_train.train_command(parse("act", "--dataset", str(dataset)), tmp_path / "a")
+    assert not any("use_amp" in arg for arg in plain)
+    args = parse("act", "--dataset", str(dataset), "--bf16", "--policy-arg=--policy.foo=1")
+    command = lerobot_train.train_command(args, tmp_path / "b")
+    assert "--policy.use_amp=true" in command and command[-1] == "--policy.foo=1"
+    # Resumed, the run's config keeps use_amp; --bf16 given again says so once more, never the opposite.
+    assert "--policy.use_amp=true" in lerobot_train.precision_settings(parse("act", "--resume", "x", "--bf16"))
+    assert lerobot_train.precision_settings(argparse.Namespace()) == []  # a VLA's recipe sets its dtype itself
+    amx = "fpu avx512f avx512_bf16 amx_bf16 amx_tile"
+    avx2 = "fpu sse2 avx avx2 fma"
+    assert lerobot_train.cpu_bf16_problem("cpu", amx) is None
+    assert lerobot_train.cpu_bf16_problem("cpu", "avx512f avx512_bf16") is None
+    assert "emulated" in lerobot_train.cpu_bf16_problem("cpu", avx2)
+    assert lerobot_train.cpu_bf16_problem("cuda", avx2) is None
+    flags = lerobot_train.cpu_flags()
+    assert isinstance(flags, str) and (not Path("/proc/cpuinfo").exists() or "fpu" in flags.split())

@@ -13,7 +13,7 @@ Variants, each a lever of the recipe reachable from its command line:
   reading and decoding a batch (a dataset with cameras: without them the recipe loads in the step already);
 - reread-items: every item read (and its frames decoded) from the dataset at every step, with a loader process beside
   the step (--reread-items: lerobot-train's own loading; by default the items stay in memory after their first read);
-- bf16-autocast: bf16 autocast (--policy-arg=--policy.use_amp=true: LeRobot's mixed precision through accelerate).
+- bf16-autocast: bf16 autocast (--bf16: LeRobot's --policy.use_amp=true, its mixed precision through accelerate).
 channels_last and torch.compile are not among them: lerobot-train has no option for either.
 
 No DDS. Prints a Markdown report; --json writes the numbers.
@@ -37,7 +37,7 @@ VARIANTS = {
     "recipe": [],
     "one-thread": ["--torch-threads", "1"],
     "inline-loading": ["--loader-workers", "0"],
-    "bf16-autocast": ["--policy-arg=--policy.use_amp=true"],
+    "bf16-autocast": ["--bf16"],
     "reread-items": ["--reread-items"],
 }
 # LeRobot's MetricsTracker line, e.g. "... updt_s:2.871 data_s:0.012".

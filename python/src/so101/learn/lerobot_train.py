@@ -235,6 +235,13 @@ def add_arguments(p: argparse.ArgumentParser, name: str) -> None:
         "fine-tuning on a dataset that grew (so101-learn demos --driver ... --after ...); the settings, optimizer "
         "and learning-rate schedule are a new run's",
     )
+    p.add_argument(
+        "--bf16",
+        action="store_true",
+        help="train under bfloat16 autocast (LeRobot's --policy.use_amp=true, kept in the run's config): the camera "
+        "ACT's model step 0.72x on a CPU with AVX512-BF16 and AMX, but many times slower on one without, which emulates "
+        "it (docs/benchmarks.md); on a GPU, its autocast",
+    )
     p.add_argument("--policy-arg", action="append", default=[], help="one more lerobot-train argument (repeatable)")
     p.add_argument("--output", default=None, help=f"lerobot-train's output directory (default outputs/{name}-<time>/)")
     p.add_argument(
@@ -307,9 +314,43 @@ def with_run_settings(command: list[str], args, output: Path) -> list[str]:
         f"--num_workers={loader_workers(args)}",
         "--wandb.enable=false",
         f"--output_dir={output}",
+        *precision_settings(args),
         *args.policy_arg,
     ]
     return launched(command, args)
+
+
+def precision_settings(args) -> list[str]:
+    """--bf16 as lerobot-train takes it: LeRobot's mixed precision (accelerate's bf16 autocast on a
+    CPU, torch's default autocast type on a GPU), saved in the run's config, so --resume keeps it."""
+    # A VLA's recipe (so101.learn.vla) has no --bf16: it sets the policy's own dtype.
+    return ["--policy.use_amp=true"] if getattr(args, "bf16", False) else []
+
+
+def cpu_bf16_problem(device: str, cpu_flags: str) -> str | None:
+    """Why --bf16 would slow this run down, or None: a CPU without AVX512-BF16 or AMX-BF16 (the
+    flags of /proc/cpuinfo) emulates bfloat16, which made the camera ACT's model step 24 times
+    slower on an AVX2-only host (docs/benchmarks.md)."""
+    if not device.startswith("cpu"):
+        return None
+    flags = set(cpu_flags.split())
+    if flags & {"avx512_bf16", "amx_bf16"}:
+        return None
+    return (
+        "--bf16 on a CPU without AVX512-BF16 or AMX-BF16: bfloat16 is emulated there, and a camera ACT step took 24 "
+        "times as long on such a CPU (docs/benchmarks.md); leave --bf16 out unless a GPU trains"
+    )
+
+
+def cpu_flags() -> str:
+    """This CPU's feature flags (/proc/cpuinfo's first `flags` line; empty where there is none)."""
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith("flags"):
+                return line.partition(":")[2]
+    except OSError:
+        pass
+    return ""
 
 
 LEROBOT_TRAIN = "lerobot.scripts.lerobot_train"
@@ -451,7 +492,7 @@ def resume_command(args, checkpoint: Checkpoint, output: Path) -> list[str]:
     ]
     if args.save_every is not None:
         command.append(f"--save_freq={args.save_every}")
-    return launched(command + args.policy_arg, args)
+    return launched(command + precision_settings(args) + args.policy_arg, args)
 
 
 def run(args) -> int:
@@ -481,6 +522,8 @@ def run(args) -> int:
     if args.num_processes <= 0 or (args.loader_workers is not None and args.loader_workers < 0):
         raise SystemExit(f"{name}: --num-processes must be positive, --loader-workers not negative")
 
+    if args.bf16 and (problem := cpu_bf16_problem(args.device, cpu_flags())):
+        print(f"{name}: warning: {problem}", file=sys.stderr, flush=True)
     environment = dict(os.environ)
     if args.torch_threads:
         environment["OMP_NUM_THREADS"] = str(args.torch_threads)
