@@ -61,15 +61,20 @@ if name not in contract.TASKS:
 print(name)
 PY
 }
-# Checked before the set-up where a python3 is on PATH already (a typo costs no install), else after.
+# Checked before the set-up where a python3 is on PATH already (a typo costs no install), else once
+# the set-up has made the venv.
+task_checked=0
 if command -v python3 >/dev/null 2>&1; then
     task="$(contract_task python3)" || exit 2
+    task_checked=1
 fi
 
 "${REPO_ROOT}/scripts/setup.sh"
 
 VENV_BIN="${REPO_ROOT}/.venv/bin"
-task="$(contract_task "${VENV_BIN}/python")" || exit 2
+if [ "${task_checked}" = 0 ]; then
+    task="$(contract_task "${VENV_BIN}/python")" || exit 2
+fi
 repo_id="local/so101_${task}"
 mkdir -p "${output}"
 echo "==> recording ${episodes} expert episode(s) of ${task} into ${output}/bags"
