@@ -111,3 +111,24 @@ def test_the_gpu_recipe_at_the_main_jobs_640x480_takes_a_few_steps_on_the_cpu(ca
     config = json.loads((output / "checkpoints" / "last" / "pretrained_model" / "config.json").read_text())
     assert config["input_features"]["observation.images.top"]["shape"] == [3, 480, 640]
     assert config["pretrained_backbone_weights"] is None
+
+
+def test_bf16_trains_the_camera_policy_channels_last_and_saves_checkpoints_lerobot_reads(camera_demos, tmp_path):
+    """`--bf16` on a camera dataset: LeRobot's mixed precision with the convolutions in
+    channels_last (so101.learn.channels_last), checkpoints LeRobot writes (the optimizer's
+    channels_last moments made contiguous, which safetensors requires; reading them back is
+    test_channels_last's) and a policy so101-run-policy loads."""
+    from safetensors.torch import load_file
+
+    from so101.evaluate.policy import StackPolicy
+
+    output = tmp_path / "act_bf16"
+    tiny = ["--policy.dim_model=32", "--policy.n_heads=2", "--policy.dim_feedforward=64", "--policy.n_encoder_layers=1"]
+    argv = ["act", "--dataset", str(camera_demos), "--steps", "2", "--batch-size", "4", "--eval", "0", "--bf16"]
+    done = learn(*argv, "--save-every", "1", "--output", str(output), *[f"--policy-arg={arg}" for arg in tiny], timeout=400)
+    assert "convolutions train in channels_last" in done.stdout + done.stderr
+    for step in ("000001", "000002"):
+        assert load_file(output / "checkpoints" / step / "training_state" / "optimizer_state.safetensors")
+    checkpoint = output / "checkpoints" / "last" / "pretrained_model"
+    assert json.loads((checkpoint / "config.json").read_text())["use_amp"] is True
+    assert {camera.name for camera in StackPolicy(str(checkpoint)).cameras} == {"top", "wrist"}

@@ -238,9 +238,9 @@ def add_arguments(p: argparse.ArgumentParser, name: str) -> None:
     p.add_argument(
         "--bf16",
         action="store_true",
-        help="train under bfloat16 autocast (LeRobot's --policy.use_amp=true, kept in the run's config): the camera "
-        "ACT's model step 0.72x on a CPU with AVX512-BF16 and AMX, but many times slower on one without, which emulates "
-        "it (docs/benchmarks.md); on a GPU, its autocast",
+        help="train under bfloat16 autocast (LeRobot's --policy.use_amp=true, kept in the run's config), a camera "
+        "policy's convolutions in channels_last: the camera ACT's model step 0.63x on a CPU with AVX512-BF16 and AMX, "
+        "but many times slower on one without, which emulates it (docs/benchmarks.md); on a GPU, its autocast",
     )
     p.add_argument("--policy-arg", action="append", default=[], help="one more lerobot-train argument (repeatable)")
     p.add_argument("--output", default=None, help=f"lerobot-train's output directory (default outputs/{name}-<time>/)")

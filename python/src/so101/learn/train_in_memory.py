@@ -1,5 +1,7 @@
 """lerobot-train itself, with one change: each item of the training dataset is kept in memory after
-its first read (`python -m so101.learn.train_in_memory` takes lerobot-train's arguments).
+its first read (`python -m so101.learn.train_in_memory` takes lerobot-train's arguments). And one
+layout: under mixed precision a camera policy's convolutions train in channels_last
+(so101.learn.channels_last).
 
 Why: LeRobotDataset builds an item each time it is asked, from Arrow rows (about 6 ms per item on
 this 2-core CPU for the state recipes' windows of 2 observations and 16 actions: 372 ms a batch of
@@ -32,6 +34,7 @@ from pathlib import Path
 import torch
 from torch.utils.data import Dataset, IterableDataset
 
+from . import channels_last
 from .checkpoints import record_items_in_memory
 
 # The share of the memory available at the start that kept frames may take.
@@ -212,18 +215,24 @@ def recording_kept_items(save_checkpoint, kept: KeptItems):
 
 
 def main() -> None:
+    from lerobot.common import train_utils
     from lerobot.scripts import lerobot_train
 
     factory = getattr(lerobot_train, "make_train_eval_datasets", None)
     save_checkpoint = getattr(lerobot_train, "save_checkpoint", None)
-    if factory is None or save_checkpoint is None:
+    make_policy = getattr(lerobot_train, "make_policy", None)
+    save_optimizer_state = getattr(train_utils, "save_optimizer_state", None)
+    if None in (factory, save_checkpoint, make_policy, save_optimizer_state):
         raise SystemExit(
-            "so101.learn.train_in_memory: this LeRobot's lerobot-train makes its datasets or checkpoints another way; "
-            "train with so101-learn --reread-items (lerobot-train itself)"
+            "so101.learn.train_in_memory: this LeRobot's lerobot-train makes its datasets, policy or checkpoints another "
+            "way; train with so101-learn --reread-items (lerobot-train itself)"
         )
     kept = KeptItems()
     lerobot_train.make_train_eval_datasets = with_items_in_memory(factory, kept)
     lerobot_train.save_checkpoint = recording_kept_items(save_checkpoint, kept)
+    # Under mixed precision with cameras, the layout oneDNN's bf16 convolutions want (so101.learn.channels_last).
+    lerobot_train.make_policy = channels_last.making_channels_last(make_policy)
+    train_utils.save_optimizer_state = channels_last.saving_contiguous_state(save_optimizer_state)
     lerobot_train.main()
 
 
