@@ -1,17 +1,18 @@
 """so101.learn.channels_last: under mixed precision a camera policy LeRobot builds trains with its
 convolutions in channels_last; a float32 one, or one without images, is left as LeRobot made it;
-and the optimizer's channels_last moments are saved by LeRobot's own saver (which safetensors would
-refuse) and read back by LeRobot's own loader."""
+and the optimizer's channels_last moments, which safetensors refuses, are saved by LeRobot's own
+saver once its save_file makes them contiguous, and read back by LeRobot's own loader."""
 
 from __future__ import annotations
 
 import pytest
 import torch
 from lerobot.configs.types import FeatureType, PolicyFeature
+from lerobot.optim import optimizers
 from lerobot.optim.optimizers import load_optimizer_state, save_optimizer_state
 from lerobot.policies.act.configuration_act import ACTConfig
 
-from so101.learn.channels_last import contiguous, making_channels_last, saving_contiguous_state, wants_channels_last
+from so101.learn.channels_last import contiguous_tensors, making_channels_last, saving_contiguous, wants_channels_last
 
 STATE = {"observation.state": PolicyFeature(type=FeatureType.STATE, shape=(6,))}
 CAMERA = {"observation.images.top": PolicyFeature(type=FeatureType.VISUAL, shape=(3, 24, 32))}
@@ -60,14 +61,15 @@ def stepped_optimizer() -> tuple[torch.nn.Module, torch.optim.Optimizer]:
     return model, optimizer
 
 
-def test_lerobots_saver_refuses_channels_last_moments_and_takes_them_made_contiguous(tmp_path):
+def test_lerobots_saver_refuses_channels_last_moments_and_takes_them_made_contiguous(tmp_path, monkeypatch):
     model, optimizer = stepped_optimizer()
     assert not optimizer.state[model.weight]["exp_avg"].is_contiguous()
     with pytest.raises(ValueError, match="contiguous"):
         save_optimizer_state(optimizer, tmp_path / "plain")
+    monkeypatch.setattr(optimizers, "save_file", saving_contiguous(optimizers.save_file))
     saved = tmp_path / "contiguous"
     saved.mkdir()
-    saving_contiguous_state(save_optimizer_state)(optimizer, saved)
+    save_optimizer_state(optimizer, saved)
 
     _, fresh = stepped_optimizer()
     for state in fresh.state.values():
@@ -78,18 +80,17 @@ def test_lerobots_saver_refuses_channels_last_moments_and_takes_them_made_contig
         assert loaded.state[next(iter(loaded.state))][name].equal(optimizer.state[model.weight][name])
 
 
-def test_a_dict_of_optimizers_is_saved_one_by_one_in_lerobots_layout(tmp_path):
+def test_a_dict_of_optimizers_is_saved_one_by_one_in_lerobots_layout(tmp_path, monkeypatch):
     _, first = stepped_optimizer()
     _, second = stepped_optimizer()
-    saving_contiguous_state(save_optimizer_state)({"policy": first, "critic": second}, tmp_path)
+    monkeypatch.setattr(optimizers, "save_file", saving_contiguous(optimizers.save_file))
+    save_optimizer_state({"policy": first, "critic": second}, tmp_path)
     assert {path.name for path in tmp_path.iterdir()} == {"policy", "critic"}
     assert all(any((tmp_path / name).iterdir()) for name in ("policy", "critic"))
 
 
-def test_contiguous_reaches_every_tensor_of_a_nested_state():
+def test_contiguous_tensors_makes_every_tensor_contiguous_with_its_values():
     strided = torch.rand(2, 3, 4, 5).to(memory_format=torch.channels_last)
-    state = {"state": {0: {"step": torch.tensor(1.0), "exp_avg": strided}}, "groups": [strided, (strided, 1)], "lr": 0.1}
-    made = contiguous(state)
-    assert made["state"][0]["exp_avg"].is_contiguous() and made["groups"][0].is_contiguous()
-    assert made["groups"][1][0].is_contiguous() and made["groups"][1][1] == 1 and made["lr"] == 0.1
-    assert made["state"][0]["exp_avg"].equal(strided)
+    made = contiguous_tensors({"state.0.exp_avg": strided, "state.0.step": torch.tensor(1.0)})
+    assert all(tensor.is_contiguous() for tensor in made.values())
+    assert made["state.0.exp_avg"].equal(strided) and made["state.0.step"].item() == 1.0

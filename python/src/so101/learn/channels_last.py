@@ -9,8 +9,8 @@ that has it"). So the layout follows the run's mixed precision (the policy confi
 weights to the bit.
 
 The weights are saved contiguous all the same (safetensors' save_model makes them so); the
-optimizer's moments, which AdamW creates in the parameters' layout, are made contiguous before
-lerobot-train writes them, as safetensors requires.
+optimizer's moments, which AdamW creates in the parameters' layout, are made contiguous where
+LeRobot's optimizer saver hands them to safetensors, which requires it.
 """
 
 from __future__ import annotations
@@ -45,28 +45,16 @@ def making_channels_last(make_policy: Callable) -> Callable:
     return make
 
 
-def contiguous(value):
-    """`value` (an optimizer's state dict, or any part of it) with every tensor contiguous."""
-    if isinstance(value, torch.Tensor):
-        return value.contiguous()
-    if isinstance(value, dict):
-        return {key: contiguous(item) for key, item in value.items()}
-    if isinstance(value, list | tuple):
-        return type(value)(contiguous(item) for item in value)
-    return value
+def contiguous_tensors(tensors: dict) -> dict:
+    """`tensors` (safetensors' name -> tensor) with every tensor contiguous."""
+    return {name: tensor.contiguous() for name, tensor in tensors.items()}
 
 
-def saving_contiguous_state(save_optimizer_state: Callable) -> Callable:
-    """lerobot's save_optimizer_state, given the optimizer's state with contiguous tensors (a dict
-    of optimizers, which lerobot saves one by one, each so)."""
+def saving_contiguous(save_file: Callable) -> Callable:
+    """safetensors' save_file, as LeRobot's optimizer saver calls it, each tensor made contiguous
+    first (every optimizer of a run, however LeRobot groups them, goes through it)."""
 
-    def save(optimizer, save_dir, optim_state_dict=None):
-        if isinstance(optimizer, dict):
-            for name, one in optimizer.items():
-                (save_dir / name).mkdir(exist_ok=True, parents=True)
-                save(one, save_dir / name)
-            return None
-        state = optimizer.state_dict() if optim_state_dict is None else optim_state_dict
-        return save_optimizer_state(optimizer, save_dir, optim_state_dict=contiguous(state))
+    def save(tensors, filename, metadata=None):
+        return save_file(contiguous_tensors(tensors), filename, metadata=metadata)
 
     return save

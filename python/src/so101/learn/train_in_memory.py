@@ -215,14 +215,14 @@ def recording_kept_items(save_checkpoint, kept: KeptItems):
 
 
 def main() -> None:
-    from lerobot.common import train_utils
+    from lerobot.optim import optimizers
     from lerobot.scripts import lerobot_train
 
     factory = getattr(lerobot_train, "make_train_eval_datasets", None)
     save_checkpoint = getattr(lerobot_train, "save_checkpoint", None)
     make_policy = getattr(lerobot_train, "make_policy", None)
-    save_optimizer_state = getattr(train_utils, "save_optimizer_state", None)
-    if None in (factory, save_checkpoint, make_policy, save_optimizer_state):
+    save_file = getattr(optimizers, "save_file", None)
+    if None in (factory, save_checkpoint, make_policy, save_file):
         raise SystemExit(
             "so101.learn.train_in_memory: this LeRobot's lerobot-train makes its datasets, policy or checkpoints another "
             "way; train with so101-learn --reread-items (lerobot-train itself)"
@@ -232,7 +232,7 @@ def main() -> None:
     lerobot_train.save_checkpoint = recording_kept_items(save_checkpoint, kept)
     # Under mixed precision with cameras, the layout oneDNN's bf16 convolutions want (so101.learn.channels_last).
     lerobot_train.make_policy = channels_last.making_channels_last(make_policy)
-    train_utils.save_optimizer_state = channels_last.saving_contiguous_state(save_optimizer_state)
+    optimizers.save_file = channels_last.saving_contiguous(save_file)
     lerobot_train.main()
 
 
