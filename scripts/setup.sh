@@ -71,12 +71,14 @@ PYTHON="${REPO_ROOT}/.venv/bin/python" "${REPO_ROOT}/scripts/fetch_backgrounds.s
 cargo fetch --locked --manifest-path "${REPO_ROOT}/Cargo.toml"
 log "building the workspace (release) into ${CARGO_TARGET_DIR}"
 cargo build --release --locked --workspace --manifest-path "${REPO_ROOT}/Cargo.toml"
-# The simulation core's Python extension (the in-process Gymnasium environments), built from the
-# same target directory (nothing recompiles) and installed into the venv.
+# The simulation core's Python extension (the in-process Gymnasium environments), installed into
+# the venv. Built in a target directory of its own: maturin gives PyO3's build script an
+# environment cargo alone does not (PYO3_ENVIRONMENT_SIGNATURE), so in a shared one every later
+# cargo build, clippy and test rebuilt PyO3 and everything above it, and maturin rebuilt them again.
 log "installing the so101_native Python extension into ${REPO_ROOT}/.venv"
 rm -f "${CARGO_TARGET_DIR}"/wheels/so101_native-*.whl
 "${REPO_ROOT}/.venv/bin/maturin" build --release --locked --quiet --compatibility linux --auditwheel skip \
-    --manifest-path "${REPO_ROOT}/crates/so101_native/Cargo.toml" \
+    --manifest-path "${REPO_ROOT}/crates/so101_native/Cargo.toml" --target-dir "${CARGO_TARGET_DIR}/python_extension" \
     --interpreter "${REPO_ROOT}/.venv/bin/python" --out "${CARGO_TARGET_DIR}/wheels"
 "${REPO_ROOT}/.venv/bin/python" -m pip install --quiet --disable-pip-version-check --force-reinstall --no-deps \
     "${CARGO_TARGET_DIR}"/wheels/so101_native-*.whl
