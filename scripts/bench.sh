@@ -17,6 +17,7 @@
 #   scripts/bench.sh train_step --dataset DIR [--policy act|pose_act|diffusion] [--steps N] [--skip W] [--variant V] [--json FILE]   (not in `all`: it needs a dataset)
 #   scripts/bench.sh model_step --dataset DIR [--batch-size B] [--steps N] [--variant V] [--json FILE]   (not in `all`: it needs a dataset with cameras)
 #   scripts/bench.sh pose_estimate CKPT --dataset DIR [--episodes N] [--anchor-episodes N] [--seed N] [--randomize [RANGES]] [--json FILE]   (not in `all`: it needs a pose_act policy)
+#   scripts/bench.sh grasps CKPT [--failures-of EVAL_INFO | --episodes N --seed N] [--randomize [RANGES]] [--json FILE]   (not in `all`: it needs a policy)
 set -euo pipefail
 . "$(dirname "${BASH_SOURCE[0]}")/common.sh"
 help_if_asked "${BASH_SOURCE[0]}" "$@"
@@ -27,7 +28,7 @@ run() {
         --bin-dir "${CARGO_TARGET_DIR}/release" "${@:2}"
 }
 case "${1:-all}" in
-    sim | sim_core | driver | recorder | cameras | camera_node | expert | convert | storage | servo_model | sysid | camera_align | backgrounds | train_step | model_step | pose_estimate) run "$@" ;;
+    sim | sim_core | driver | recorder | cameras | camera_node | expert | convert | storage | servo_model | sysid | camera_align | backgrounds | train_step | model_step | pose_estimate | grasps) run "$@" ;;
     all) run sim && run sim_core && run driver && run recorder && run cameras && run camera_node && run expert && run convert && run storage && run servo_model && run sysid && run camera_align && run backgrounds ;;
-    *) echo "usage: scripts/bench.sh [sim|sim_core|driver|recorder|cameras|camera_node|expert|convert|storage|servo_model|sysid|camera_align|backgrounds|train_step|model_step|pose_estimate] [ARGS...]" >&2; exit 2 ;;
+    *) echo "usage: scripts/bench.sh [sim|sim_core|driver|recorder|cameras|camera_node|expert|convert|storage|servo_model|sysid|camera_align|backgrounds|train_step|model_step|pose_estimate|grasps] [ARGS...]" >&2; exit 2 ;;
 esac

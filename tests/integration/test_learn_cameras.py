@@ -65,6 +65,17 @@ def test_the_camera_recipe_trains_from_scratch_with_augmentation_and_evaluates_b
     overall = lerobot_eval_two_small_cameras(checkpoint, tmp_path / "lerobot_eval")
     assert overall["n_episodes"] == 1 and overall["pc_success"] == 0.0  # 8 steps cannot reach the bin
 
+    # Its failure told apart by so101-bench grasps, replaying the evaluation's failing seed against the expert's.
+    numbers = tmp_path / "grasps.json"
+    command = [sys.executable, "-m", "so101.bench.grasps", checkpoint, "--failures-of", output / "eval" / "eval_info.json"]
+    done = subprocess.run(
+        [str(c) for c in command + ["--threads", "1", "--json", numbers]], capture_output=True, text=True, timeout=300
+    )
+    assert done.returncode == 0, done.stdout + done.stderr
+    report = json.loads(numbers.read_text())
+    assert report["seeds"] == [info["per_episode"][0]["seed"]] and report["policy"]["kinds"]["success"] == 0
+    assert report["expert"]["kinds"]["success"] == 1 and "| median distance from the cube at the first closing |" in done.stdout
+
 
 def test_camera_items_kept_in_memory_train_the_very_weights_of_frames_decoded_at_every_step(camera_demos, tmp_path):
     """The camera recipe keeps each item's decoded frames in memory after its first read and

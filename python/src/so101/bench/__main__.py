@@ -15,6 +15,7 @@ from . import (
     driver,
     ee,
     expert,
+    grasps,
     latency,
     model_step,
     pose_estimate,
@@ -48,6 +49,7 @@ BENCHMARKS = {
         train_step,
         model_step,
         pose_estimate,
+        grasps,
     )
 }
 
