@@ -110,29 +110,38 @@ def summary(episodes: list[GraspEpisode]) -> dict:
 
 
 def replay(act, reset, env, seeds: list[int], max_steps: int) -> list[GraspEpisode]:
-    """Each seed's episode with `act(observation) -> joint targets (rad)`, accounted for."""
+    """Each seed's episode with `act(observation) -> joint targets (rad)`, run by so101-run-policy's
+    own episode loop (so101.evaluate.episodes.run_episodes), each step's joints, cube and gripper
+    command kept on the way, then accounted for."""
     import so101_native
 
+    from .. import contract
     from ..ee import ee_poses
+    from ..evaluate.episodes import run_episodes
 
+    steps: list[list[tuple]] = []  # per episode: (joints, cube centre, gripper command) each step
+
+    def recording_reset(observation: dict) -> None:
+        steps.append([])
+        reset(observation)
+
+    def recording_act(observation: dict) -> np.ndarray:
+        action = np.asarray(act(observation), dtype=float)
+        steps[-1].append((observation["agent_pos"], observation["environment_state"][:3], action[5]))
+        return action
+
+    # No video is filmed, so nothing is written under `output`.
+    results = run_episodes(
+        env, recording_act, recording_reset, seeds, max_steps, [], Path("."), contract.CONTROL_RATE, quiet=True
+    )
     base = np.asarray(so101_native.SIM_BASE_IN_WORLD)
     episodes = []
-    for seed in seeds:
-        observation, _ = env.reset(seed=seed)
-        reset(observation)
-        joints, cubes, commands, success = [], [], [], False
-        for _ in range(max_steps):
-            action = np.asarray(act(observation), dtype=float)
-            joints.append(np.asarray(observation["agent_pos"], dtype=float))
-            cubes.append(np.asarray(observation["environment_state"][:3], dtype=float))
-            commands.append(action[5])
-            observation, _, terminated, _, info = env.step(action)
-            success = success or bool(info["is_success"])
-            if terminated:
-                break
-        joints = np.asarray(joints)
+    for result, episode in zip(results, steps, strict=True):
+        joints = np.asarray([joint for joint, _, _ in episode], dtype=float)
+        cubes = [cube for _, cube, _ in episode]
+        commands = [command for _, _, command in episode]
         grasp_points = ee_poses(joints)[:, :3] + base
-        episodes.append(grasp_episode(seed, success, grasp_points, cubes, joints[:, 5], commands))
+        episodes.append(grasp_episode(result.seed, result.success, grasp_points, cubes, joints[:, 5], commands))
     return episodes
 
 
