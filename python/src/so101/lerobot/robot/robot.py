@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import gc
 import logging
 import threading
 import time
@@ -34,6 +35,7 @@ class SO101ROS(Robot):
         self._goal: np.ndarray | None = None  # last command sent, rad
         self._ee_target: np.ndarray | None = None  # action_space "ee": the last end-effector target asked for
         self._context = self._node = self._executor = self._thread = self._publisher = None
+        self._froze_heap = False  # connect() froze the garbage collector's heap; disconnect() thaws it
 
     @cached_property
     def observation_features(self) -> dict:
@@ -69,6 +71,16 @@ class SO101ROS(Robot):
         except Exception:
             self.disconnect()
             raise
+        self._freeze_heap()
+
+    def _freeze_heap(self) -> None:
+        """A control loop follows connect() (lerobot-record, -teleoperate, -replay, robot_client), on
+        its own clock: one full collection of the heap torch, LeRobot and the dataset built (up to
+        280 ms measured with both cores busy) stalls a period, and lerobot-record drops its frame.
+        Collected once here, then frozen (gc.freeze), that heap is not scanned again."""
+        gc.collect()
+        gc.freeze()
+        self._froze_heap = True
 
     def _open(self) -> None:
         """A fresh rclpy context (its own DDS participant) with this robot's subscriptions, its
@@ -176,6 +188,9 @@ class SO101ROS(Robot):
         self._executor.shutdown(timeout_sec=1)
         self._node.destroy_node()
         self._node = self._executor = self._thread = self._publisher = None
+        if self._froze_heap:
+            gc.unfreeze()
+            self._froze_heap = False
 
     # ---- I/O
     def get_observation(self) -> dict[str, Any]:
