@@ -159,7 +159,7 @@ def policy_episodes(args, seeds: list[int]) -> list[GraspEpisode]:
     env = make_env("cube_to_bin", backend="inprocess", lite=True, cameras=cameras or None, **sim_settings(args))
     try:
         return replay(
-            lambda o: policy.act(policy.observation(o["agent_pos"], o.get("pixels", {}), o["environment_state"])),
+            policy.act_on_env,
             lambda _o: policy.reset(),
             env,
             seeds,

@@ -193,6 +193,13 @@ class StackPolicy:
             return radians_from_lerobot(values) if self.units == "lerobot" else values
         return self._joint_targets(ee_from_lerobot_ee(values) if self.units == "lerobot" else values)
 
+    def act_on_env(self, observation: dict) -> np.ndarray:
+        """Joint targets for an observation of the Gymnasium envs (so101.envs: agent_pos,
+        pixels by camera, environment_state)."""
+        return self.act(
+            self.observation(observation["agent_pos"], observation.get("pixels", {}), observation["environment_state"])
+        )
+
     def _joint_targets(self, ee_target: np.ndarray) -> np.ndarray:
         """An end-effector target -> joint targets by the IK, from the episode's first joints on."""
         if self._commander is None:

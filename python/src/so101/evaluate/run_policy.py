@@ -320,10 +320,6 @@ def run_share(policy: StackPolicy, args, first_index: int, seeds: list[int], env
     from ..envs import make_env
     from .episodes import run_episodes
 
-    def act(observation: dict) -> np.ndarray:
-        pixels = observation.get("pixels", {})
-        return policy.act(policy.observation(observation["agent_pos"], pixels, observation["environment_state"]))
-
     env = make_env(
         args.sim_task,
         backend=args.backend,
@@ -338,7 +334,7 @@ def run_share(policy: StackPolicy, args, first_index: int, seeds: list[int], env
     try:
         results = run_episodes(
             env,
-            act,
+            policy.act_on_env,
             lambda _observation: policy.reset(),
             seeds=seeds,
             max_steps=int(round(args.episode_time * args.fps)),
