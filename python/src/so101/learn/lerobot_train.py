@@ -328,14 +328,22 @@ def precision_settings(args) -> list[str]:
 
 
 def cpu_bf16_problem(device: str, cpu_flags: str) -> str | None:
-    """Why --bf16 would slow this run down, or None: a CPU without AVX512-BF16 or AMX-BF16 (the
-    flags of /proc/cpuinfo) emulates bfloat16, which made the camera ACT's model step 24 times
-    slower on an AVX2-only host (docs/benchmarks.md)."""
+    """Why --bf16 may slow this run down, or None where it paid (a GPU, or a CPU with AMX-BF16).
+    From the flags of /proc/cpuinfo: without AVX512-BF16 bfloat16 is emulated (the camera ACT's
+    model step 24 times slower on an AVX2-only host); with AVX512-BF16 but no AMX the step was
+    1.44 times slower than float32 on an Intel host (docs/benchmarks.md): a warning, not a refusal,
+    since another CPU may differ and so101-bench model_step tells in 20 s."""
     if not device.startswith("cpu"):
         return None
     flags = set(cpu_flags.split())
-    if flags & {"avx512_bf16", "amx_bf16"}:
+    if "amx_bf16" in flags:
         return None
+    if "avx512_bf16" in flags:
+        return (
+            "--bf16 on a CPU with AVX512-BF16 but no AMX-BF16: the camera ACT's step was 1.44 times slower than "
+            "float32 on such a CPU (docs/benchmarks.md); compare the two on this one with `so101-bench model_step "
+            "--dataset D --variant recipe --variant bf16-channels-last` and keep --bf16 only if it is faster"
+        )
     return (
         "--bf16 on a CPU without AVX512-BF16 or AMX-BF16: bfloat16 is emulated there, and a camera ACT step took 24 "
         "times as long on such a CPU (docs/benchmarks.md); leave --bf16 out unless a GPU trains"
