@@ -49,6 +49,8 @@ def datasets(tmp_path_factory) -> dict[str, Path]:
         "ros_randomized": ["--randomize", *CAMERA, *STACK],
         "inprocess_randomized": ["--randomize", *CAMERA, "--backend", "inprocess"],
         "inprocess_randomized_2": ["--randomize", *CAMERA, "--backend", "inprocess", "--workers", "2"],
+        # The robust camera recipe's demonstrations (docs/learning.md): DART's pushes.
+        "inprocess_pushed": ["--randomize", *CAMERA, "--backend", "inprocess", "--perturb", "0.06"],
     }
     for name, extra in runs.items():
         done = learn("demos", *QUIET_EXPERT, *extra, "--output", str(root / name), timeout=240)
@@ -102,6 +104,38 @@ def test_the_workers_write_the_dataset_one_process_writes(datasets):
     assert simulation == [
         entry["simulation"] for entry in meta(datasets["inprocess_randomized_2"], "so101_simulation.json")["episodes"]
     ]
+
+
+def test_pushed_demonstrations_move_the_arm_off_the_path_and_keep_the_experts_targets(datasets):
+    """--perturb, as the robust recipe records it: the seed's scenes, the arm's recorded states
+    pushed off the unpushed run's path, and the actions still the expert's targets (the way back),
+    which LeRobot's loader reads."""
+    from lerobot.datasets.lerobot_dataset import LeRobotDataset
+
+    plain, pushed = episodes(datasets["inprocess_randomized"]), episodes(datasets["inprocess_pushed"])
+    assert sorted(plain) == sorted(pushed) == [0, 1]
+    assert [entry["simulation"] for entry in meta(datasets["inprocess_pushed"], "so101_simulation.json")["episodes"]] == [
+        entry["simulation"] for entry in meta(datasets["inprocess_randomized"], "so101_simulation.json")["episodes"]
+    ]
+    # The dataset says its episodes were pushed, and by how much.
+    assert [entry.get("perturb") for entry in meta(datasets["inprocess_pushed"], "so101_simulation.json")["episodes"]] == [
+        0.06
+    ] * 2
+    assert all("perturb" not in entry for entry in meta(datasets["inprocess_randomized"], "so101_simulation.json")["episodes"])
+    for index in plain:
+        a, b = plain[index], pushed[index]
+        count = min(len(a["observation.state"]), len(b["observation.state"]), 150)  # the approach, jaws open
+        # Pushes of 0.06 rad (3.4 degrees) on the shoulder and elbow: the state leaves the plain path ...
+        off = path_distance(
+            b["observation.state"][:count, :3].astype(np.float64), a["observation.state"][:, :3].astype(np.float64), 30
+        )
+        assert off.max() > 1.5, f"episode {index}: the pushed arm stayed within {off.max():.2f} of the plain path"
+        # ... while the recorded action, the expert's target, is the arm's way back: nearer the plain
+        # path than the pushed state is.
+        back = path_distance(b["action"][:count, :3].astype(np.float64), a["action"][:, :3].astype(np.float64), 30)
+        assert np.median(back) < np.median(off), (np.median(back), np.median(off))
+    dataset = LeRobotDataset("local/so101_demos", root=datasets["inprocess_pushed"])
+    assert dataset.meta.total_episodes == 2 and tuple(dataset[0]["observation.images.top"].shape) == (3, 24, 32)
 
 
 def test_the_workers_and_the_join_keep_ffmpeg_s_chatter_to_themselves(datasets):

@@ -288,7 +288,11 @@ def record(options: Options, episodes: int, workers: int, output: Path, after: P
             joined = work / "joined"
             join(options.repo_id, roots, joined)
             kept = [r for r in results if r.kept]
-            settings = [{"episode_index": index, "bag": r.label, "simulation": r.simulation} for index, r in enumerate(kept)]
+            # The pushes' sigma goes with each episode, so the dataset says its states were pushed.
+            pushed = {"perturb": options.perturb} if options.perturb > 0 else {}
+            settings = [
+                {"episode_index": index, "bag": r.label, "simulation": r.simulation, **pushed} for index, r in enumerate(kept)
+            ]
             if after is not None:
                 settings = simulation_settings(after) + [
                     dict(entry, episode_index=entry["episode_index"] + episode_count(after)) for entry in settings
