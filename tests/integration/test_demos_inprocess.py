@@ -114,14 +114,12 @@ def test_pushed_demonstrations_move_the_arm_off_the_path_and_keep_the_experts_ta
 
     plain, pushed = episodes(datasets["inprocess_randomized"]), episodes(datasets["inprocess_pushed"])
     assert sorted(plain) == sorted(pushed) == [0, 1]
-    assert [entry["simulation"] for entry in meta(datasets["inprocess_pushed"], "so101_simulation.json")["episodes"]] == [
-        entry["simulation"] for entry in meta(datasets["inprocess_randomized"], "so101_simulation.json")["episodes"]
-    ]
+    plain_entries = meta(datasets["inprocess_randomized"], "so101_simulation.json")["episodes"]
+    pushed_entries = meta(datasets["inprocess_pushed"], "so101_simulation.json")["episodes"]
+    assert [entry["simulation"] for entry in pushed_entries] == [entry["simulation"] for entry in plain_entries]
     # The dataset says its episodes were pushed, and by how much.
-    assert [entry.get("perturb") for entry in meta(datasets["inprocess_pushed"], "so101_simulation.json")["episodes"]] == [
-        0.06
-    ] * 2
-    assert all("perturb" not in entry for entry in meta(datasets["inprocess_randomized"], "so101_simulation.json")["episodes"])
+    assert [entry.get("perturb") for entry in pushed_entries] == [0.06] * 2
+    assert all("perturb" not in entry for entry in plain_entries)
     for index in plain:
         a, b = plain[index], pushed[index]
         count = min(len(a["observation.state"]), len(b["observation.state"]), 150)  # the approach, jaws open

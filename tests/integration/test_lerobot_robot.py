@@ -99,7 +99,7 @@ def test_connect_leaves_the_control_loop_no_heap_to_scan(tmp_path):
 # period (its warning: "Record loop is running slower (2.9 Hz) than the target FPS"). Beside a
 # training worker in the parallel phase, one iteration of 345 ms at the start of episode 0 lost
 # 4 of 45 frames (CI, 2026-11-27); alone, on a fresh clone's first run, episode 0 lost 4 again
-# (2026-12-06). Such a stall is a full garbage collection of the process's heap (up to 280 ms
+# (2026-12-06). Such a stall can be a full garbage collection of the process's heap (up to 280 ms
 # measured beside a training): connect() now freezes that heap (the test above). The tests of this
 # recording (and the policy trained on it, driven by async inference's own clock) still run in the
 # `alone` phase: a training worker beside them takes a core the sim node needs.
