@@ -15,6 +15,8 @@ to convert.
 --backend inprocess records the same demonstrations without ROS, straight into the dataset,
 --workers N processes in parallel (so101.learn.demos_inprocess); the stack's path stays the default.
 In-process only, --perturb SIGMA pushes the arm off the expert's path (so101.learn.perturbation),
+--missed-grasps FRACTION keeps that share of episodes from a regrasp after a grasp placed beside the
+cube on purpose (so101.learn.missed_grasps),
 --driver CKPT lets a trained policy send the arm while the expert's targets are recorded, and
 --after DATASET puts a dataset's episodes before the new ones (DAgger: so101.learn.dagger).
 """
@@ -33,6 +35,7 @@ from .. import contract, sim_options
 from ..paths import repo_root
 from ..stack.launch_plan import LOCKSTEP, speed_value
 from .dagger import check_share
+from .missed_grasps import check_fraction
 from .perturbation import check_sigma
 
 REPO_ID = "local/so101_demos"
@@ -59,6 +62,14 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         metavar="SIGMA",
         help="--backend inprocess: push the arm off the expert's path by smooth joint offsets of SIGMA rad while the "
         "jaws are open, recording the expert's own targets (DART: states beside the expert's, and the way back)",
+    )
+    p.add_argument(
+        "--missed-grasps",
+        type=float,
+        default=0.0,
+        metavar="FRACTION",
+        help="--backend inprocess: in this share of the episodes the expert is told the cube lies 2-3.5 cm off, "
+        "grasps there, and grasps again where it is; those episodes are kept from the regrasp on (recoveries)",
     )
     p.add_argument(
         "--driver",
@@ -156,9 +167,16 @@ def run(args) -> int:
         raise SystemExit("so101-learn demos: --episodes must be positive")
     try:
         check_sigma(args.perturb)
+        check_fraction(args.missed_grasps)
     except ValueError as error:
         raise SystemExit(f"so101-learn demos: {error}") from None
-    for given, option in ((args.perturb > 0, "--perturb"), (args.driver, "--driver"), (args.after, "--after")):
+    in_process_only = (
+        (args.perturb > 0, "--perturb"),
+        (args.missed_grasps > 0, "--missed-grasps"),
+        (args.driver, "--driver"),
+        (args.after, "--after"),
+    )
+    for given, option in in_process_only:
         if given and args.backend != "inprocess":
             raise SystemExit(f"so101-learn demos: {option} works in-process only (--backend inprocess)")
     if args.perturb > 0 and args.driver:
@@ -220,6 +238,7 @@ def run_inprocess(args, output: Path) -> int:
         environment_state=not args.no_environment_state,
         keep_failures=args.keep_failures,
         perturb=args.perturb,
+        missed_grasps=args.missed_grasps,
         driver=args.driver,
         driver_share=args.driver_share,
         servo_params=args.servo_params,
@@ -268,10 +287,12 @@ def inprocess_summary(results, seconds: float, after: tuple[int, Path] | None = 
     successes = [r for r in results if r.success]
     kept = [r for r in results if r.kept]
     regrasped = sum(r.regrasps > 0 for r in results)
+    recoveries = sum(r.kept and r.missed_grasp is not None for r in results)
     return (
         f"Summary: {len(results)} demonstration(s) played, {len(successes)} successful "
         f"({sum(r.regrasps > 0 for r in successes)} of them after a regrasp; {regrasped} regrasped in all), "
         f"{len(kept)} kept ({sum(r.frames for r in kept)} frames), in {seconds:.0f} s "
         f"({60 * len(results) / max(seconds, 1e-9):.1f}/min)"
         + (f", after the {after[0]} episode(s) of {after[1]}" if after else "")
+        + (f"; {recoveries} kept from a regrasp after a grasp beside the cube" if recoveries else "")
     )

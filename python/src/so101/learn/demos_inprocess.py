@@ -41,6 +41,7 @@ from ..dataset.convert import (
 from ..dataset.ee_columns import ee_columns
 from ..evaluate.parallel import run_shares, split
 from ..units import lerobot_from_radians
+from .missed_grasps import draw_offset, from_frame, recovery_start, told
 from .perturbation import Perturbation
 
 
@@ -86,6 +87,7 @@ class Options:
     task: str = "cube_to_bin"
     action_space: str = "joint"  # "ee": end-effector actions and state (so101.dataset.ee_columns)
     perturb: float = 0.0  # rad: so101.learn.perturbation's sigma (0: the expert's own path)
+    missed_grasps: float = 0.0  # share of episodes kept from a regrasp after a told miss (so101.learn.missed_grasps)
     driver: str | None = None  # a checkpoint whose policy sends the arm (so101.learn.dagger)
     driver_share: float = 1.0  # the policy's share of the target the arm is sent
 
@@ -101,6 +103,7 @@ class Recorded:
     note: str
     simulation: dict | None
     regrasps: int = 0
+    missed_grasp: dict | None = None  # the told offset and the first frame kept (so101.learn.missed_grasps)
 
     @property
     def label(self) -> str:
@@ -123,7 +126,7 @@ def play_episode(
     import so101_native
 
     period = 1.0 / contract.CONTROL_RATE
-    frames: dict[str, list] = {"state": [], "action": [], "reward": [], "success": [], "cube": [], "images": []}
+    frames: dict[str, list] = {"state": [], "action": [], "reward": [], "success": [], "cube": [], "images": [], "regrasps": []}
     action = np.asarray(observation["agent_pos"], dtype=np.float32)
     judged_from = succeeded_at = None
     for step in range(limit):
@@ -139,6 +142,7 @@ def play_episode(
         frames["success"].append(success)
         frames["cube"].append(np.asarray(observation["environment_state"], dtype=np.float32))
         frames["images"].append(observation.get("pixels", {}))
+        frames["regrasps"].append(expert.regrasps)
         if judging:
             if success and succeeded_at is None:
                 succeeded_at = now
@@ -190,8 +194,9 @@ def record_share(options: Options, first: int, count: int, root: str, workers: i
             seed=expert_seed(options.seed, episode),
             task=options.task,
         )
+        offset = draw_offset(options.missed_grasps, options.seed, episode) if options.missed_grasps > 0 else None
         try:
-            expert.reset(observation)
+            expert.reset(observation if offset is None else told(observation, offset))
         except ValueError as error:  # out of reach: teleop_node counts it, records nothing
             recorded.append(Recorded(episode, False, 0, False, str(error), settings))
             continue
@@ -202,6 +207,15 @@ def record_share(options: Options, first: int, count: int, root: str, workers: i
             driver.reset()
         frames, success = play_episode(env, expert, observation, 0.0, bool(info["is_success"]), limit, drive)
         kept = success or options.keep_failures
+        missed = None
+        if offset is not None:
+            start = recovery_start(frames["regrasps"])
+            if start is None:  # the told grasp held the cube: nothing to recover from, nothing kept
+                note = "the grasp beside the cube held it: no recovery to keep"
+                recorded.append(Recorded(episode, success, 0, False, note, settings, expert.regrasps))
+                continue
+            frames = from_frame(frames, start)
+            missed = {"told_offset_m": [round(float(v), 4) for v in offset], "from_frame": start}
         if kept:
             if dataset is None:
                 dataset = LeRobotDataset.create(
@@ -221,7 +235,9 @@ def record_share(options: Options, first: int, count: int, root: str, workers: i
             # workers it oversubscribes the cores (2 workers with 3 cameras: 3x one's time).
             write_episode(dataset, frames, success, task_text, options, parallel_encoding=workers == 1)
         note = "the task succeeded" if success else "the task did not succeed"
-        recorded.append(Recorded(episode, success, len(frames["state"]), kept, note, settings, expert.regrasps))
+        if missed is not None:
+            note += f"; a recovery from a grasp {1000 * np.linalg.norm(offset):.0f} mm off, from its frame {start}"
+        recorded.append(Recorded(episode, success, len(frames["state"]), kept, note, settings, expert.regrasps, missed))
     if dataset is not None:
         dataset.finalize()
     return recorded
@@ -291,7 +307,9 @@ def record(options: Options, episodes: int, workers: int, output: Path, after: P
             # The pushes' sigma goes with each episode, so the dataset says its states were pushed.
             pushed = {"perturb": options.perturb} if options.perturb > 0 else {}
             settings = [
-                {"episode_index": index, "bag": r.label, "simulation": r.simulation, **pushed} for index, r in enumerate(kept)
+                {"episode_index": index, "bag": r.label, "simulation": r.simulation, **pushed}
+                | ({"missed_grasp": r.missed_grasp} if r.missed_grasp else {})
+                for index, r in enumerate(kept)
             ]
             if after is not None:
                 settings = simulation_settings(after) + [
