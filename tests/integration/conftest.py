@@ -8,9 +8,9 @@ only loopback (DDS discovery multicasts on every interface):
         scripts/isolated .venv/bin/python -m pytest tests/integration
 
 (scripts/test.sh does exactly this.) The conftest refuses to run (pytest.exit) anywhere
-else. Every pytest run gets its own namespace. scripts/test.sh runs the tests in two pytest-xdist
-workers (`-n 2`) that share that namespace, so each worker takes a DDS domain of its own (below): the
-two workers' graphs never meet. Each test starts its own node(s). A missing node binary FAILS the
+else. Every pytest run gets its own namespace. scripts/test.sh runs the tests in pytest-xdist
+workers (`-n 3` on two cores) that share that namespace, so each worker takes a DDS domain of its
+own (below): the workers' graphs never meet. Each test starts its own node(s). A missing node binary FAILS the
 tests (it never skips them).
 """
 

@@ -109,9 +109,10 @@ def test_the_gpu_recipe_at_the_main_jobs_640x480_takes_a_few_steps_on_the_cpu(ca
     one camera of the two, as the cost of both is twice the time for the same check), then the same
     `so101-learn act` for two steps on the CPU."""
     dataset = tmp_path / "dataset640"
-    # One episode is enough for two steps of training (conversion at 640x480 is what takes the time).
+    # One episode is enough for two steps of training, and 5 frames a second of it (encoding 640x480
+    # frames is what takes the time: 10 s at the recording's 30, 0.3 s at 5).
     episode = camera_demos.parent / "bags" / "episode_000000"
-    command = [str(VENV_BIN / "so101-bag-to-lerobot"), str(episode), "--output", str(dataset)]
+    command = [str(VENV_BIN / "so101-bag-to-lerobot"), str(episode), "--output", str(dataset), "--fps", "5"]
     command += ["--image-size", "640x480", "--cameras", "top", "--no-environment-state", "--quiet"]
     done = subprocess.run(command, capture_output=True, text=True, timeout=300)
     assert done.returncode == 0, (done.stdout + done.stderr)[-3000:]
