@@ -9,7 +9,6 @@ import json
 
 import numpy as np
 import pytest
-import so101_native
 
 from so101 import contract
 from so101.envs import So101InProcessEnv
@@ -17,6 +16,7 @@ from so101.evaluate.expert import ExpertPolicy
 from so101.learn import cli, demos
 from so101.learn.demos_inprocess import Options, play_episode, record
 from so101.learn.missed_grasps import OFFSET_RANGE, check_fraction, draw_offset, from_frame, recovery_start, told
+from so101.learn.perturbation import jaws_open_above
 
 GRIPPER = contract.JOINT_NAMES.index("gripper")
 
@@ -82,8 +82,7 @@ def test_the_expert_told_a_wrong_pose_grasps_beside_the_cube_then_where_it_is(of
     cubes = np.array(frames["cube"])
     assert np.abs(cubes[start, :3] - cubes[0, :3]).max() < 0.01, "the told grasp carried the cube away"
     gripper = np.array(frames["state"])[start, GRIPPER]
-    middle = 0.5 * (so101_native.EXPERT_GRIPPER_OPEN + so101_native.EXPERT_GRIPPER_CLOSED)
-    assert (gripper < middle) == (jaws_at_the_regrasp == "shut"), gripper
+    assert (gripper < jaws_open_above()) == (jaws_at_the_regrasp == "shut"), gripper
     kept = from_frame(frames, start)
     assert {name: len(values) for name, values in kept.items()} == {name: len(frames["state"]) - start for name in frames}
     assert np.array_equal(kept["state"][0], frames["state"][start])

@@ -194,7 +194,7 @@ def record_share(options: Options, first: int, count: int, root: str, workers: i
             seed=expert_seed(options.seed, episode),
             task=options.task,
         )
-        offset = draw_offset(options.missed_grasps, options.seed, episode) if options.missed_grasps > 0 else None
+        offset = draw_offset(options.missed_grasps, options.seed, episode)  # None: the expert is told the truth
         try:
             expert.reset(observation if offset is None else told(observation, offset))
         except ValueError as error:  # out of reach: teleop_node counts it, records nothing
