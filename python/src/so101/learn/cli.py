@@ -2,6 +2,8 @@
 
   demos      record N expert demonstrations through the stack (sim, scripted expert, recorder)
              and convert the bags into a LeRobot dataset
+  backgrounds  draw pictures to show behind the simulated scene in training, and the
+             randomization file that shows them (demos --randomize DIR/randomization.toml)
   act        train LeRobot's ACT with lerobot-train, CPU-sized, on the state (joints + cube pose)
              or on joints + cameras (a dataset of demos --cameras ... --no-environment-state),
              then evaluate it through so101-run-policy in lockstep
@@ -26,7 +28,7 @@ import sys
 
 from .. import subcommands
 from ..subcommands import Subcommand
-from . import demos, eval_recipe, lerobot_train, sb3_bc, sb3_sac, vla
+from . import demos, eval_recipe, lerobot_train, procedural_backgrounds, sb3_bc, sb3_sac, vla
 
 RECIPES = {
     "demos": Subcommand(
@@ -34,6 +36,12 @@ RECIPES = {
         demos.add_arguments,
         demos.run,
         demos.__doc__,
+    ),
+    "backgrounds": Subcommand(
+        "draw pictures to show behind the simulated scene in training, and a randomization file showing them",
+        procedural_backgrounds.add_arguments,
+        procedural_backgrounds.run,
+        procedural_backgrounds.__doc__,
     ),
     **{
         name: Subcommand(
