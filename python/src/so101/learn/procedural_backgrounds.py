@@ -15,7 +15,7 @@ nothing third-party, none of the held-out photographs (a held-out set must stay 
 wanted. A user who can photograph their own workspace has better: docs/sim_to_real.md,
 "Your own background behind the scene".
 
-Each picture (determined by --seed, its camera and its number) layers what a desk and a room show:
+Each picture (determined by --seed, its camera's name and its number) layers what a desk and a room show:
 - a base of fractal noise through a palette of 2-4 colours (wood, cloth, carpet, walls);
 - in half of them, stripes or a checker at a random angle and period (grain, tiles, mats, shelves);
 - 0-15 rectangles and ellipses of random colours and sizes (things on a desk, furniture);
@@ -29,6 +29,8 @@ cameras see). The wrist camera rides the arm and keeps the sim's scenery: it get
 from __future__ import annotations
 
 import argparse
+import sys
+import zlib
 from collections.abc import Callable
 from pathlib import Path
 
@@ -37,8 +39,13 @@ import numpy as np
 from .. import contract
 
 RANDOMIZATION_FILE = "randomization.toml"
-# A snapshot's size: the fixed cameras' 4:3, fitted down to whatever size a recording renders.
-DEFAULT_SIZE = (640, 480)
+# The fixed cameras' 4:3, twice the robust recipe's 96x72 (each is fitted down to the render's
+# size). Every env keeps all its pictures decoded: 200 per camera at this size take 33 MB, at
+# 640x480 they would take 370 MB in each worker process.
+DEFAULT_SIZE = (192, 144)
+# The pictures' file names: the ones a new run replaces (anything else in a camera's folder is
+# refused, since the simulation would show it too).
+PREFIX = "bg_"
 
 
 def fixed_cameras() -> tuple[str, ...]:
@@ -87,13 +94,13 @@ def pattern(rng: np.random.Generator, width: int, height: int) -> np.ndarray:
     return ((np.floor(along) + np.floor(across)) % 2).astype(np.float32)
 
 
-def draw_background(seed: int, camera: int, number: int, size: tuple[int, int] = DEFAULT_SIZE) -> np.ndarray:
-    """Picture `number` of camera `camera` (its index among the fixed cameras) for `seed`: RGB,
-    uint8, (height, width, 3). The same arguments always draw the same picture."""
+def draw_background(seed: int, camera: str, number: int, size: tuple[int, int] = DEFAULT_SIZE) -> np.ndarray:
+    """Picture `number` of camera `camera` for `seed` (not negative): RGB, uint8, (height, width,
+    3). The same arguments always draw the same picture."""
     from PIL import Image, ImageDraw
 
     width, height = size
-    rng = np.random.default_rng((seed, camera, number, 0xB6))
+    rng = np.random.default_rng((seed, zlib.crc32(camera.encode()), number, 0xB6))
     image = through_palette(fractal_noise(rng, width, height), palette(rng, int(rng.integers(2, 5))))
     if rng.random() < 0.5:
         strength = rng.uniform(0.2, 0.7) * pattern(rng, width, height)[..., None]
@@ -108,15 +115,17 @@ def draw_background(seed: int, camera: int, number: int, size: tuple[int, int] =
         shape(tuple(int(v) for v in (*(centre - half), *(centre + half))), fill=fill)
     y, x = np.mgrid[0:height, 0:width].astype(np.float32)
     toward = rng.uniform(-1.0, 1.0, size=2) / np.array([width, height])
-    lamp = 1.0 + rng.uniform(0.0, 0.6) * ((x - width / 2) * toward[0] + (y - height / 2) * toward[1])
-    lit = np.asarray(picture, dtype=np.float32) * rng.uniform(0.6, 1.2) * lamp[..., None]
+    # From 0.6 to 1.4 across the picture at most, the whole 0.7 to 1.15 times as bright.
+    lamp = 1.0 + rng.uniform(0.0, 0.4) * ((x - width / 2) * toward[0] + (y - height / 2) * toward[1])
+    lit = np.asarray(picture, dtype=np.float32) * rng.uniform(0.7, 1.15) * lamp[..., None]
     return np.clip(lit, 0.0, 255.0).round().astype(np.uint8)
 
 
-def randomization_text(count: int, seed: int, distractor: bool) -> str:
+def randomization_text(count: int, seed: int, size: tuple[int, int], distractor: bool) -> str:
     """The randomization file beside the pictures: the default ranges, the pictures, a distractor."""
+    options = f"--count {count} --seed {seed} --size {size[0]}x{size[1]}{'' if distractor else ' --no-distractor'}"
     return (
-        f"# so101-learn backgrounds --count {count} --seed {seed}{'' if distractor else ' --no-distractor'}:\n"
+        f"# so101-learn backgrounds {options}:\n"
         "# the default ranges (assets/randomization.toml), these pictures behind the fixed cameras' scene\n"
         f"# and {'a distractor on the table' if distractor else 'no distractor'}.\n"
         "[scene]\n"
@@ -129,18 +138,35 @@ def write(
     output: Path, count: int, seed: int, size: tuple[int, int], distractor: bool, done: Callable[[], object] = lambda: None
 ) -> Path:
     """The pictures as output/CAMERA/bg_NNNN.jpg and output/randomization.toml; the file's path.
-    `done` is called after each picture."""
+    The pictures of an earlier run there are replaced; a folder holding other pictures is refused
+    (ValueError) before anything is written. `done` is called after each picture."""
     from PIL import Image
 
-    for camera, name in enumerate(fixed_cameras()):
-        folder = output / name
+    folders = [output / name for name in fixed_cameras()]
+    for folder in folders:
+        others = [path.name for path in not_ours(folder)]
+        if others:
+            raise ValueError(
+                f"{folder} holds pictures this command did not draw ({', '.join(sorted(others)[:3])}, ...): choose another --output"
+            )
+    for folder in folders:
         folder.mkdir(parents=True, exist_ok=True)
+        for earlier in folder.glob(f"{PREFIX}*.jpg"):
+            earlier.unlink()
         for number in range(count):
-            Image.fromarray(draw_background(seed, camera, number, size)).save(folder / f"bg_{number:04d}.jpg", quality=90)
+            picture = draw_background(seed, folder.name, number, size)
+            Image.fromarray(picture).save(folder / f"{PREFIX}{number:04d}.jpg", quality=90)
             done()
     ranges = output / RANDOMIZATION_FILE
-    ranges.write_text(randomization_text(count, seed, distractor))
+    ranges.write_text(randomization_text(count, seed, size, distractor))
     return ranges
+
+
+def not_ours(folder: Path) -> list[Path]:
+    """The pictures in `folder` the simulation would show that this command did not write."""
+    if not folder.is_dir():
+        return []
+    return [path for path in folder.iterdir() if path.suffix.lower() in (".jpg", ".jpeg") and not path.name.startswith(PREFIX)]
 
 
 def picture_size(text: str) -> tuple[int, int]:
@@ -154,18 +180,29 @@ def picture_size(text: str) -> tuple[int, int]:
     return width, height
 
 
-def positive(text: str) -> int:
-    value = int(text)
-    if value < 1:
-        raise argparse.ArgumentTypeError(f"{value}: at least 1")
-    return value
+def at_least(low: int) -> Callable[[str], int]:
+    """argparse's `type` for a whole number of at least `low`."""
+
+    def parse(text: str) -> int:
+        value = int(text)
+        if value < low:
+            raise argparse.ArgumentTypeError(f"{value}: at least {low}")
+        return value
+
+    return parse
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--output", type=Path, required=True, help="folder for CAMERA/*.jpg and randomization.toml")
-    p.add_argument("--count", type=positive, default=200, help="pictures per fixed camera (default 200)")
-    p.add_argument("--seed", type=int, default=0, help="which pictures: the same seed draws the same ones")
-    p.add_argument("--size", type=picture_size, default=DEFAULT_SIZE, help="WIDTHxHEIGHT of each picture (default 640x480)")
+    p.add_argument("--count", type=at_least(1), default=200, help="pictures per fixed camera (default 200)")
+    p.add_argument("--seed", type=at_least(0), default=0, help="which pictures: the same seed draws the same ones")
+    p.add_argument(
+        "--size",
+        type=picture_size,
+        default=DEFAULT_SIZE,
+        help="WIDTHxHEIGHT of each picture (default 192x144; each simulation keeps them all decoded: "
+        "200 per camera take 33 MB at this size, 370 MB at 640x480)",
+    )
     p.add_argument("--no-distractor", dest="distractor", action="store_false", help="leave the distractor out")
 
 
@@ -174,7 +211,11 @@ def run(args: argparse.Namespace) -> int:
 
     cameras = fixed_cameras()
     with tqdm(total=args.count * len(cameras), desc="backgrounds", unit="picture") as bar:
-        ranges = write(args.output, args.count, args.seed, args.size, args.distractor, done=bar.update)
+        try:
+            ranges = write(args.output, args.count, args.seed, args.size, args.distractor, done=bar.update)
+        except ValueError as refused:
+            print(f"so101-learn backgrounds: {refused}", file=sys.stderr)
+            return 2
     print(f"{args.count} pictures for each of {', '.join(cameras)} in {args.output}")
     print(f"Train and evaluate with them: --randomize {ranges}")
     return 0
