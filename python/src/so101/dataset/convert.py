@@ -33,6 +33,7 @@ from pathlib import Path
 import numpy as np
 
 from .. import contract
+from ..arguments import picture_size
 from ..ee import EE_FEATURE_NAMES
 from ..messages import rgb_image, stamp_seconds
 from ..units import FEATURE_NAMES, lerobot_from_radians
@@ -200,15 +201,8 @@ def resized(images: list[np.ndarray], width: int, height: int) -> list[np.ndarra
     return [np.asarray(Image.fromarray(image).resize((width, height), Image.BOX)) for image in images]
 
 
-def image_size(text: str) -> tuple[int, int]:
-    """WIDTHxHEIGHT (the sim's --cameras notation) -> (width, height)."""
-    try:
-        width, height = (int(part) for part in text.lower().split("x"))
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"{text!r}: WIDTHxHEIGHT, e.g. 128x96") from None
-    if not (8 <= width <= 4096 and 8 <= height <= 4096):
-        raise argparse.ArgumentTypeError(f"{text!r}: each side 8 to 4096 pixels")
-    return width, height
+# --image-size: WIDTHxHEIGHT, each side at least 8 pixels.
+image_size = picture_size(8)
 
 
 def quiet_video_encoder() -> None:

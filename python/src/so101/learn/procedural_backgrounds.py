@@ -37,12 +37,15 @@ from pathlib import Path
 import numpy as np
 
 from .. import contract
+from ..arguments import at_least, picture_size
 
 RANDOMIZATION_FILE = "randomization.toml"
 # The fixed cameras' 4:3, twice the robust recipe's 96x72 (each is fitted down to the render's
 # size). Every env keeps all its pictures decoded: 200 per camera at this size take 33 MB, at
 # 640x480 they would take 370 MB in each worker process.
 DEFAULT_SIZE = (192, 144)
+# Smaller pictures hold too few pixels for the noise's coarse octaves and the shapes.
+MIN_SIDE = 16
 # The pictures' file names: the ones a new run replaces (anything else in a camera's folder is
 # refused, since the simulation would show it too).
 PREFIX = "bg_"
@@ -169,36 +172,13 @@ def not_ours(folder: Path) -> list[Path]:
     return [path for path in folder.iterdir() if path.suffix.lower() in (".jpg", ".jpeg") and not path.name.startswith(PREFIX)]
 
 
-def picture_size(text: str) -> tuple[int, int]:
-    """argparse's `type` for --size: WIDTHxHEIGHT, each 16 to 4096 pixels."""
-    try:
-        width, height = (int(part) for part in text.lower().split("x"))
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"{text!r}: WIDTHxHEIGHT, e.g. 640x480") from None
-    if not (16 <= width <= 4096 and 16 <= height <= 4096):
-        raise argparse.ArgumentTypeError(f"{text!r}: each side from 16 to 4096 pixels")
-    return width, height
-
-
-def at_least(low: int) -> Callable[[str], int]:
-    """argparse's `type` for a whole number of at least `low`."""
-
-    def parse(text: str) -> int:
-        value = int(text)
-        if value < low:
-            raise argparse.ArgumentTypeError(f"{value}: at least {low}")
-        return value
-
-    return parse
-
-
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--output", type=Path, required=True, help="folder for CAMERA/*.jpg and randomization.toml")
     p.add_argument("--count", type=at_least(1), default=200, help="pictures per fixed camera (default 200)")
     p.add_argument("--seed", type=at_least(0), default=0, help="which pictures: the same seed draws the same ones")
     p.add_argument(
         "--size",
-        type=picture_size,
+        type=picture_size(MIN_SIDE),
         default=DEFAULT_SIZE,
         help="WIDTHxHEIGHT of each picture (default 192x144; each simulation keeps them all decoded: "
         "200 per camera take 33 MB at this size, 370 MB at 640x480)",
