@@ -14,7 +14,16 @@ import pytest
 import so101
 
 # Bottom up; each room may import its own modules and those of the rooms it lists.
-SHARED = ("so101.contract", "so101.units", "so101.ee", "so101.paths", "so101.messages", "so101.sim_options", "so101.subcommands")
+SHARED = (
+    "so101.contract",
+    "so101.units",
+    "so101.ee",
+    "so101.paths",
+    "so101.messages",
+    "so101.sim_options",
+    "so101.subcommands",
+    "so101.arguments",
+)
 MAY_IMPORT = {
     "shared": set(),
     "dataset": {"shared"},
